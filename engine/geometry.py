@@ -1,0 +1,221 @@
+"""The solid to mesh: a validated, closed, consistently oriented surface.
+
+:func:`load_surface` reads STL, OBJ, PLY, OFF or GLB through trimesh and
+refuses anything that is not a valid solid with one clear line.
+:class:`Geometry` answers the vectorised queries the other stages need:
+inside test, closest point on the surface, signed distance (positive inside).
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import igl
+import numpy as np
+import trimesh
+
+from .errors import GeometryError
+from .inside import InsideGrid
+
+log = logging.getLogger(__name__)
+
+SURFACE_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".off": "off", ".glb": "glb"}
+
+
+@dataclass
+class Geometry:
+    """A valid solid bounded by a closed, outward-oriented triangle surface."""
+
+    mesh: trimesh.Trimesh
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def vertices(self) -> np.ndarray:
+        return self.mesh.vertices
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self.mesh.faces
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.mesh.bounds
+
+    @property
+    def volume(self) -> float:
+        return float(self.mesh.volume)
+
+    @property
+    def area(self) -> float:
+        return float(self.mesh.area)
+
+    @property
+    def scale(self) -> float:
+        """Length of the bounding-box diagonal: the model size."""
+        return float(np.linalg.norm(self.bounds[1] - self.bounds[0]))
+
+    @cached_property
+    def _igl_arrays(self):
+        return (np.ascontiguousarray(self.mesh.vertices, dtype=np.float64),
+                np.ascontiguousarray(self.mesh.faces, dtype=np.int64))
+
+    def _query(self, points: np.ndarray):
+        points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        V, F = self._igl_arrays
+        if len(points) == 0:
+            return np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3))
+        dist, face, closest, _ = igl.signed_distance(
+            points, V, F, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)
+        return -dist, face, closest
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """Distance to the surface, positive inside the solid."""
+        return self._query(points)[0]
+
+    def closest_point(self, points: np.ndarray):
+        """Closest surface point, its distance and the face it lies on."""
+        sd, face, closest = self._query(points)
+        return closest, np.abs(sd), face
+
+    def _exact_contains(self, points: np.ndarray) -> np.ndarray:
+        return self._query(points)[0] > 0
+
+    @cached_property
+    def _inside_grid(self) -> InsideGrid:
+        V, F = self._igl_arrays
+        return InsideGrid(V, F, self._exact_contains)
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """True for points strictly inside the solid (vectorised, grid-accelerated)."""
+        return self._inside_grid.contains(points)
+
+
+def load_surface(path: str | Path, *, allow_multiple_solids: bool = False) -> Geometry:
+    """Read a surface file and validate it as a solid (see :func:`validate_surface`)."""
+    path = Path(path)
+    source = str(path)
+    suffix = path.suffix.lower()
+    if suffix not in SURFACE_FORMATS:
+        raise GeometryError(f"unknown surface format '{path.suffix or '(none)'}'", where=source,
+                            fix=f"give one of: {', '.join(sorted(SURFACE_FORMATS))}")
+    if not path.is_file():
+        raise GeometryError("file not found", where=source, fix="check the path")
+    if path.stat().st_size == 0:
+        raise GeometryError("the file is empty", where=source, fix="export the solid again")
+    try:
+        loaded = trimesh.load(str(path), file_type=SURFACE_FORMATS[suffix], force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for broken files
+        raise GeometryError(f"cannot read as {suffix[1:].upper()} ({exc.__class__.__name__}: {exc})",
+                            where=source, fix="check that the file is a valid surface mesh") from None
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise GeometryError("the file holds no triangle surface", where=source,
+                            fix="export the solid's boundary as triangles")
+    return validate_surface(loaded.vertices, loaded.faces, source, allow_multiple_solids=allow_multiple_solids)
+
+
+def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: bool = False,
+                     check_self_intersections: bool = True) -> Geometry:
+    """Build a :class:`Geometry` from raw arrays, or raise a one-line GeometryError.
+
+    Refused: no triangles, NaN/inf coordinates, open or non-manifold surface,
+    self-intersections, non-orientable surface, zero volume, several solids
+    (unless allowed). Fixed and noted: inconsistent or inside-out orientation,
+    duplicate vertices, degenerate faces.
+    """
+    vertices = np.asarray(vertices, dtype=float)
+    faces = np.asarray(faces, dtype=np.int64)
+    notes: list[str] = []
+    if faces.ndim != 2 or len(faces) == 0:
+        raise GeometryError("the surface has no triangles", where=source, fix="export the solid's boundary")
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise GeometryError(f"{int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex {first})",
+                            where=source, fix="repair or re-export the surface")
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.merge_vertices()
+    degenerate = ~mesh.nondegenerate_faces(height=1e-12 * max(mesh.scale, 1e-300))
+    if degenerate.any():
+        mesh.update_faces(~degenerate)
+        mesh.remove_unreferenced_vertices()
+        notes.append(f"removed {int(degenerate.sum())} degenerate (zero-area) faces")
+    if len(mesh.faces) == 0:
+        raise GeometryError("the surface has no triangles of non-zero area", where=source,
+                            fix="export the solid's boundary")
+    _check_closed(mesh, source)
+    if check_self_intersections:
+        _check_self_intersections(mesh, source)
+    notes += _orient(mesh, source, allow_multiple_solids)
+    if mesh.volume <= 1e-9 * mesh.scale ** 3:
+        raise GeometryError(f"the surface encloses no volume ({mesh.volume:.3g})", where=source,
+                            fix="give a solid body, not a sheet or a degenerate surface")
+    for note in notes:
+        log.warning("%s: %s", source, note)
+    return Geometry(mesh, source, notes)
+
+
+def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:
+    edges = np.sort(mesh.edges, axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    open_edges = int((counts == 1).sum())
+    nonmanifold = int((counts > 2).sum())
+    if open_edges:
+        raise GeometryError(f"the surface is not closed (not watertight): {open_edges} edges bound a hole",
+                            where=source, fix="close the holes in the CAD tool or a mesh repair tool")
+    if nonmanifold:
+        raise GeometryError(f"the surface is not manifold: {nonmanifold} edges are shared by more than two faces",
+                            where=source, fix="repair the surface so that each edge joins exactly two faces")
+
+
+def _check_self_intersections(mesh: trimesh.Trimesh, source: str) -> None:
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces.astype(np.int32)))
+    ms.compute_selection_by_self_intersections_per_face()
+    count = ms.current_mesh().selected_face_number()
+    if count:
+        raise GeometryError(f"the surface intersects itself ({count} faces cross other faces)",
+                            where=source, fix="union the overlapping bodies or repair the surface")
+
+
+def _orient(mesh: trimesh.Trimesh, source: str, allow_multiple_solids: bool) -> list[str]:
+    """Orient every shell outward (cavities inward); count solids. Mutates ``mesh``."""
+    notes = []
+    if not mesh.is_winding_consistent:
+        trimesh.repair.fix_winding(mesh)
+        if not mesh.is_winding_consistent:
+            raise GeometryError("the surface cannot be oriented consistently (non-orientable)",
+                                where=source, fix="repair the surface")
+        notes.append("fixed inconsistent face orientation")
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
+    shells = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)]
+    V = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    depth = np.zeros(len(shells), dtype=int)
+    if len(shells) > 1:
+        probes = np.array([V[mesh.faces[s[0], 0]] for s in shells])
+        for j, shell in enumerate(shells):
+            wn = igl.winding_number(V, np.ascontiguousarray(mesh.faces[shell], dtype=np.int64), probes)
+            inside = np.abs(wn) > 0.5
+            inside[j] = False
+            depth += inside
+    faces = mesh.faces.copy()
+    flipped = 0
+    for shell, d in zip(shells, depth):
+        tri = V[faces[shell]]
+        signed_volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0
+        want_positive = d % 2 == 0
+        if (signed_volume > 0) != want_positive:
+            faces[shell] = faces[shell][:, ::-1]
+            flipped += 1
+    if flipped:
+        mesh.faces = faces
+        notes.append(f"turned {flipped} inside-out shell(s) the right way round")
+    solids = int((depth % 2 == 0).sum())
+    if solids > 1 and not allow_multiple_solids:
+        raise GeometryError(f"the surface holds {solids} disconnected solids", where=source,
+                            fix="mesh them one at a time, or set 'allow_multiple_solids: true' in the job's geometry")
+    return notes

@@ -1,0 +1,118 @@
+"""Job files: what to mesh, how finely, with which packer and mesher, where to write.
+
+A job is YAML (or a dict) with the keys of :data:`JOB_SCHEMA`; see
+``docs/job.md``. Unknown keys and wrong types are errors naming file:line and
+the allowed keys. Paths in a job file are relative to the job file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from .errors import JobError
+from .meshing import mesher_names
+from .packing import packer_names
+from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, positive, validate
+from .shapes import SHAPES
+from .yamlfile import Located, load_yaml, located
+
+OUTPUT_FORMATS = ("vtu", "msh")
+
+
+def _formats_ok(value):
+    unknown = [v for v in value if v not in OUTPUT_FORMATS]
+    if unknown or not value:
+        return f"has unknown or no formats {unknown}; allowed: {', '.join(OUTPUT_FORMATS)}"
+    return None
+
+
+def job_schema() -> dict:
+    return {
+        "geometry": Field(MAPPING, required=True, doc="what to mesh: 'shape' (+ 'parameters') or 'file'", fields={
+            "shape": Field(STRING, choices=tuple(SHAPES), doc="a built-in parametric solid"),
+            "parameters": Field(MAPPING, default={}, open_keys=True, doc="the shape's parameters"),
+            "file": Field(STRING, doc="an STL, OBJ, PLY, OFF or GLB surface, relative to the job file"),
+            "allow_multiple_solids": Field(BOOLEAN, default=False, doc="accept several disconnected solids"),
+            "feature_angle": Field(NUMBER, default=30.0, check=in_range(0.0, 180.0),
+                                   doc="dihedral angle in degrees above which an edge is a feature edge"),
+        }),
+        "size": Field(NUMBER, check=positive,
+                      doc="global target element size, in model units (default: model size / 40)"),
+        "packer": Field(STRING, default="lattice", choices=tuple(packer_names()), doc="node placement method"),
+        "mesher": Field(STRING, default="delaunay", choices=tuple(mesher_names()), doc="connection method"),
+        "seed": Field(INTEGER, default=0, doc="random seed; same input and seed give the same mesh"),
+        "output": Field(MAPPING, default=None, doc="where and what to write", fields={
+            "directory": Field(STRING, default="out", doc="output folder, relative to the job file"),
+            "name": Field(STRING, default="mesh", doc="base name of the mesh files"),
+            "formats": Field(LIST, default=["vtu", "msh"], items=Field(STRING), check=_formats_ok,
+                             doc=f"any of {', '.join(OUTPUT_FORMATS)}"),
+        }),
+    }
+
+
+@dataclass
+class Job:
+    """A validated job."""
+
+    source: str                 # job file path or '<dict>'
+    base_dir: Path              # relative paths resolve against this
+    shape: str | None
+    shape_parameters: dict
+    geometry_file: Path | None
+    allow_multiple_solids: bool
+    feature_angle: float
+    size: float | None
+    packer: str
+    mesher: str
+    seed: int
+    output_dir: Path
+    output_name: str
+    output_formats: list[str]
+    raw: dict
+
+
+def load_job(path: str | Path) -> Job:
+    """Read and validate a job file."""
+    path = Path(path)
+    data = load_yaml(path, JobError)
+    return job_from_dict(data, base_dir=path.parent, source=str(path))
+
+
+def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> Job:
+    """Validate a job given as a (possibly located) mapping."""
+    data = located(data, source)
+    if not isinstance(data, Located):
+        raise JobError("a job must be a YAML mapping", where=source, fix="see docs/job.md for the keys")
+    values = validate(data, job_schema(), JobError)
+    geo, geo_raw = values["geometry"], data["geometry"]
+    if (geo["shape"] is None) == (geo["file"] is None):
+        raise JobError("'geometry' needs exactly one of 'shape' or 'file'", where=geo_raw.where(),
+                       fix=f"e.g. 'shape: plate_cylinder_junction' (shapes: {', '.join(SHAPES)})")
+    parameters = {}
+    if geo["shape"] is not None:
+        _, schema = SHAPES[geo["shape"]]
+        raw_params = geo_raw.get("parameters") or Located()
+        if not isinstance(raw_params, Located):
+            raw_params = located(raw_params, source)
+        parameters = validate(raw_params, schema, JobError, f"geometry.parameters ({geo['shape']})")
+    elif geo["parameters"]:
+        raise JobError("'parameters' is for built-in shapes only", where=geo_raw.where("parameters"),
+                       fix="remove it, or use 'shape:' instead of 'file:'")
+    output = values["output"] or validate(Located(), job_schema()["output"].fields, JobError, "output")
+    base_dir = Path(base_dir)
+    return Job(
+        source=source, base_dir=base_dir, shape=geo["shape"], shape_parameters=parameters,
+        geometry_file=(base_dir / geo["file"]) if geo["file"] else None,
+        allow_multiple_solids=geo["allow_multiple_solids"], feature_angle=float(geo["feature_angle"]),
+        size=values["size"], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
+        output_dir=base_dir / output["directory"], output_name=output["name"],
+        output_formats=list(dict.fromkeys(output["formats"])), raw=dict(data))
+
+
+def default_job() -> Job:
+    """The built-in example: the paper's plate-cylinder junction with the cylinder near the plate edge."""
+    return job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0},
+                         base_dir=Path.cwd(), source="<default example>")
+
+
+__all__ = ["Job", "load_job", "job_from_dict", "default_job", "OUTPUT_FORMATS"]

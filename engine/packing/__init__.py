@@ -1,0 +1,62 @@
+"""Packers place mesh nodes in the solid, sized by the sizing field.
+
+A packer is a function ``pack(geometry, features, sizing, *, seed) -> Packing``
+registered under a name; a job picks it with ``packer: NAME``. Third-party
+packers register through the ``fuzzymesh.packers`` entry-point group.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+
+import numpy as np
+
+LEVELS = ("corner", "curve", "patch", "volume")
+CORNER, CURVE, PATCH, VOLUME = range(4)
+
+
+@dataclass
+class Packing:
+    """Nodes with where they live: level (corner/curve/patch/volume) and entity index."""
+
+    points: np.ndarray          # (n, 3)
+    level: np.ndarray           # (n,) int8, index into LEVELS
+    entity: np.ndarray          # (n,) index of the corner / curve / patch in Features, -1 in the volume
+    radius: np.ndarray          # (n,) half the target size at the node
+    stats: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @staticmethod
+    def concatenate(parts: list["Packing"], stats: dict | None = None) -> "Packing":
+        return Packing(np.concatenate([p.points for p in parts]).reshape(-1, 3),
+                       np.concatenate([p.level for p in parts]).astype(np.int8),
+                       np.concatenate([p.entity for p in parts]).astype(np.int64),
+                       np.concatenate([p.radius for p in parts]), stats or {})
+
+
+PACKERS: dict = {}
+
+
+def register_packer(name: str):
+    def decorate(function):
+        PACKERS[name] = function
+        return function
+    return decorate
+
+
+def get_packer(name: str):
+    _load_plugins()
+    return PACKERS[name]
+
+
+def packer_names() -> list[str]:
+    _load_plugins()
+    return sorted(PACKERS)
+
+
+def _load_plugins() -> None:
+    from . import lattice  # noqa: F401  (registers the built-in packers)
+    for ep in entry_points(group="fuzzymesh.packers"):
+        PACKERS.setdefault(ep.name, ep.load())

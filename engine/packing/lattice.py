@@ -1,0 +1,137 @@
+"""The ``lattice`` packer: an honest baseline without dynamics.
+
+Corners are nodes. Curves get nodes at equal steps of the integral of 1/h
+along their arc length. Patches get nodes from an adaptive subdivision of
+their triangles, thinned to the local spacing. The volume gets an octree
+lattice (a cell of size s emits its jittered centre where s matches h, else
+splits), thinned against the boundary nodes and itself.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..sampling import thin
+from . import CORNER, CURVE, PATCH, VOLUME, Packing, register_packer
+
+SPACING_SLACK = 2 ** (1 / 3)     # a lattice cell of size s serves h in [s / slack, s * slack]
+SURFACE_EXCLUSION = 0.8          # fraction of h kept free between surface nodes
+VOLUME_EXCLUSION = 0.7           # fraction of h kept free between volume and other nodes
+JITTER = 0.1                     # lattice jitter, fraction of the cell size
+CANDIDATES_PER_H2 = 8.0          # surface candidates per h^2 of area before thinning
+
+
+@register_packer("lattice")
+def pack_lattice(geometry, features, sizing, *, seed: int = 0) -> Packing:
+    rng = np.random.default_rng(seed)
+    parts = [_corner_nodes(features, sizing)]
+    parts.append(_curve_nodes(features, sizing, existing=parts[0].points))
+    boundary = Packing.concatenate(parts)
+    parts.append(_patch_nodes(geometry, features, sizing, boundary, rng))
+    boundary = Packing.concatenate(parts)
+    parts.append(_volume_nodes(geometry, sizing, boundary, rng))
+    packing = Packing.concatenate(parts)
+    packing.stats = {"nodes": len(packing), **{f"{name}_nodes": int((packing.level == k).sum())
+                                               for k, name in enumerate(("corner", "curve", "patch", "volume"))}}
+    return packing
+
+
+def _corner_nodes(features, sizing) -> Packing:
+    points = np.array([c.point for c in features.corners]).reshape(-1, 3)
+    return Packing(points, np.full(len(points), CORNER), np.arange(len(points)), sizing(points) / 2)
+
+
+def _curve_nodes(features, sizing, existing) -> Packing:
+    """Nodes at equal increments of the integral of 1/h along each surface curve (ends excluded)."""
+    points, entity = [], []
+    for index, curve in enumerate(features.curves):
+        if not curve.on_surface:
+            continue
+        length = curve.length
+        count = int(min(1e6, max(8, np.ceil(8 * length / sizing.h_min))))
+        s = np.linspace(0.0, length, count + 1)
+        h = sizing(curve.point_at(s))
+        steps = np.concatenate([[0.0], np.cumsum(np.diff(s) * 0.5 * (1 / h[1:] + 1 / h[:-1]))])
+        segments = max(3 if curve.closed else 1, int(np.round(steps[-1])))
+        targets = np.linspace(0.0, steps[-1], segments + 1)[1:-1] if not curve.closed \
+            else np.linspace(0.0, steps[-1], segments + 1)[:-1]
+        points.append(curve.point_at(np.interp(targets, steps, s)))
+        entity.append(np.full(len(targets), index))
+    points = np.concatenate(points).reshape(-1, 3) if points else np.zeros((0, 3))
+    entity = np.concatenate(entity) if entity else np.zeros(0, int)
+    if len(existing) and len(points):   # a loop that starts at a corner repeats it
+        gap, _ = cKDTree(existing).query(points)
+        points, entity = points[gap > 1e-9 * sizing.h_min], entity[gap > 1e-9 * sizing.h_min]
+    return Packing(points, np.full(len(points), CURVE), entity, sizing(points) / 2)
+
+
+def _subdivide(triangles: np.ndarray, sizing, max_levels: int = 24):
+    """Split triangles 1-to-4 until their longest edge is below h at their centroid."""
+    leaves, owners = [], []
+    owner = np.arange(len(triangles))
+    for _ in range(max_levels):
+        if len(triangles) == 0:
+            break
+        edges = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
+        fine = edges <= sizing(triangles.mean(axis=1))
+        leaves.append(triangles[fine])
+        owners.append(owner[fine])
+        t, owner = triangles[~fine], owner[~fine]
+        m01, m12, m20 = (t[:, 0] + t[:, 1]) / 2, (t[:, 1] + t[:, 2]) / 2, (t[:, 2] + t[:, 0]) / 2
+        triangles = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
+                                    np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
+        owner = np.tile(owner, 4)
+    leaves.append(triangles)
+    owners.append(owner)
+    return np.concatenate(leaves), np.concatenate(owners)
+
+
+def _patch_nodes(geometry, features, sizing, boundary: Packing, rng) -> Packing:
+    mesh = geometry.mesh
+    leaves, owner = _subdivide(mesh.triangles, sizing)
+    # about CANDIDATES_PER_H2 uniform random candidates per h^2 of area
+    area = 0.5 * np.linalg.norm(np.cross(leaves[:, 1] - leaves[:, 0], leaves[:, 2] - leaves[:, 0]), axis=1)
+    expected = CANDIDATES_PER_H2 * area / sizing(leaves.mean(axis=1)) ** 2
+    count = np.floor(expected).astype(int) + (rng.random(len(leaves)) < expected % 1)
+    tri = np.repeat(leaves, count, axis=0)
+    owner = np.repeat(owner, count)
+    u = rng.random((len(tri), 2))
+    flip = u.sum(axis=1) > 1
+    u[flip] = 1 - u[flip]
+    candidates = tri[:, 0] + u[:, :1] * (tri[:, 1] - tri[:, 0]) + u[:, 1:] * (tri[:, 2] - tri[:, 0])
+    patch = features.face_patch[owner]
+    all_points = np.concatenate([boundary.points, candidates])
+    h = sizing(all_points)
+    keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
+    keep = keep[len(boundary):]
+    points = candidates[keep]
+    return Packing(points, np.full(len(points), PATCH), patch[keep], h[len(boundary):][keep] / 2)
+
+
+def _octree_lattice(geometry, sizing, rng) -> np.ndarray:
+    lo, hi = geometry.bounds
+    size = sizing.h_max * SPACING_SLACK
+    counts = np.maximum(1, np.ceil((hi - lo) / size)).astype(int)
+    axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    emitted = []
+    octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    while len(centres):
+        h = sizing(centres)
+        done = size <= h * SPACING_SLACK
+        emitted.append(centres[done] + rng.uniform(-JITTER, JITTER, (int(done.sum()), 3)) * size)
+        size /= 2
+        centres = (centres[~done][:, None, :] + 0.5 * size * octants[None]).reshape(-1, 3)
+    return np.concatenate(emitted)
+
+
+def _volume_nodes(geometry, sizing, boundary: Packing, rng) -> Packing:
+    candidates = _octree_lattice(geometry, sizing, rng)
+    candidates = candidates[geometry.contains(candidates)]
+    h = sizing(candidates)
+    if len(boundary):
+        gap, _ = cKDTree(boundary.points).query(candidates)
+        candidates, h = candidates[gap >= VOLUME_EXCLUSION * h], h[gap >= VOLUME_EXCLUSION * h]
+    keep = thin(candidates, VOLUME_EXCLUSION * h, rng)
+    points = candidates[keep]
+    return Packing(points, np.full(len(points), VOLUME), np.full(len(points), -1), h[keep] / 2)

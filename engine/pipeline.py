@@ -1,0 +1,81 @@
+"""The whole chain: job -> geometry -> features -> sizing -> packing -> mesh -> files."""
+from __future__ import annotations
+
+import logging
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .features import Features, apply_names, detect_features
+from .geometry import Geometry, load_surface
+from .io import write_mesh
+from .job import Job
+from .mesh import TetMesh
+from .meshing import get_mesher
+from .packing import Packing, get_packer
+from .shapes import build_shape
+from .sizing import UniformSize, check_element_limit
+
+log = logging.getLogger("fuzzymesh")
+
+DEFAULT_MAX_ELEMENTS = 20_000_000
+SIZE_FROM_SCALE = 40.0   # default global size = model size (bounding-box diagonal) / this
+
+
+@dataclass
+class Result:
+    job: Job
+    geometry: Geometry
+    features: Features
+    sizing: object
+    packing: Packing
+    mesh: TetMesh
+    timings: dict = field(default_factory=dict)
+    files: list[Path] = field(default_factory=list)
+
+
+@contextmanager
+def stage(name: str, timings: dict):
+    start = time.perf_counter()
+    yield
+    timings[name] = time.perf_counter() - start
+
+
+def build_geometry(job: Job):
+    """Geometry, named features and characteristic lengths of the job's solid."""
+    if job.shape is not None:
+        shape = build_shape(job.shape, job.shape_parameters)
+        features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
+        return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
+    geometry = load_surface(job.geometry_file, allow_multiple_solids=job.allow_multiple_solids)
+    return geometry, detect_features(geometry, job.feature_angle)
+
+
+def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True) -> Result:
+    """Mesh the job's solid; write the outputs when ``write``. Errors are FuzzymeshErrors."""
+    timings: dict = {}
+    with stage("geometry", timings):
+        geometry, features = build_geometry(job)
+    log.info("geometry: %s, %d faces, volume %.6g, %d corners, %d curves, %d patches, named: %s (%.2f s)",
+             job.shape or job.geometry_file, len(geometry.faces), geometry.volume, len(features.corners),
+             len(features.curves), len(features.patches), ", ".join(features.names) or "none", timings["geometry"])
+    with stage("sizing", timings):
+        size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
+        sizing = UniformSize(size)
+        expected = check_element_limit(geometry, sizing, max_elements)
+    log.info("sizing: uniform h = %.4g, about %.3g tetrahedra expected (%.2f s)", size, expected, timings["sizing"])
+    with stage("packing", timings):
+        packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed)
+    log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
+    with stage("meshing", timings):
+        mesh = get_mesher(job.mesher)(packing, geometry, features)
+    log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%) (%.2f s)", job.mesher,
+             len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
+             100 * (mesh.volume / geometry.volume - 1), timings["meshing"])
+    result = Result(job, geometry, features, sizing, packing, mesh, timings)
+    if write:
+        with stage("output", timings):
+            result.files = write_mesh(mesh, job.output_dir, job.output_name, job.output_formats)
+        log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
+    return result

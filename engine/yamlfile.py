@@ -1,0 +1,107 @@
+"""Safe YAML loading that remembers where every value came from.
+
+``load_yaml`` returns plain dicts, lists and scalars, except that every
+mapping is a :class:`Located` dict that knows the file and the line/column of
+itself and of each of its keys. Errors can then name ``file:line:col``.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from .errors import FuzzymeshError
+
+
+class Located(dict):
+    """A dict with the source position of itself and of each key."""
+
+    source: str = "<dict>"
+    line: int = 0
+    col: int = 0
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.key_marks: dict = {}
+
+    def where(self, key=None) -> str:
+        """``file:line:col`` of ``key`` (or of the mapping itself)."""
+        line, col = self.key_marks.get(key, (self.line, self.col))
+        if line == 0:
+            return self.source
+        return f"{self.source}:{line}:{col}"
+
+
+def located(data, source: str = "<dict>"):
+    """Wrap plain nested dicts (e.g. built in Python) as :class:`Located`."""
+    if isinstance(data, Located):
+        return data
+    if isinstance(data, dict):
+        out = Located({k: located(v, source) for k, v in data.items()})
+        out.source = source
+        return out
+    if isinstance(data, list):
+        return [located(v, source) for v in data]
+    return data
+
+
+def _loader_for(source: str):
+    class LocatingLoader(yaml.SafeLoader):
+        pass
+
+    def construct_mapping(loader, node, deep=False):
+        loader.flatten_mapping(node)
+        mapping = Located()
+        mapping.source = source
+        mapping.line, mapping.col = node.start_mark.line + 1, node.start_mark.column + 1
+        for key_node, value_node in node.value:
+            key = loader.construct_object(key_node, deep=True)
+            try:
+                hash(key)
+            except TypeError:
+                raise FuzzymeshError(
+                    "a mapping key must be a plain value",
+                    where=f"{source}:{key_node.start_mark.line + 1}:{key_node.start_mark.column + 1}",
+                )
+            if key in mapping:
+                raise FuzzymeshError(
+                    f"duplicate key '{key}'",
+                    where=f"{source}:{key_node.start_mark.line + 1}:{key_node.start_mark.column + 1}",
+                    fix="each key may appear once in a mapping",
+                )
+            mapping[key] = loader.construct_object(value_node, deep=True)
+            mapping.key_marks[key] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+        return mapping
+
+    LocatingLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
+    return LocatingLoader
+
+
+def parse_yaml(text: str, source: str, error=FuzzymeshError):
+    """Parse YAML text with safe loading; syntax errors become one-line ``error``s."""
+    try:
+        return yaml.load(text, Loader=_loader_for(source))  # noqa: S506 - SafeLoader subclass
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
+        problem = exc.problem or exc.context or "invalid YAML"
+        raise error(f"invalid YAML: {problem}", where=where, fix="fix the YAML syntax") from None
+    except yaml.YAMLError as exc:
+        raise error(f"invalid YAML: {exc}", where=source, fix="fix the YAML syntax") from None
+
+
+def load_yaml(path: str | Path, error=FuzzymeshError):
+    """Read a YAML file safely; a missing, unreadable or empty file is an ``error``."""
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise error("file not found", where=source, fix="check the path")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"cannot read the file ({exc.__class__.__name__})", where=source,
+                    fix="give a readable UTF-8 YAML file") from None
+    data = parse_yaml(text, source, error)
+    if data is None:
+        raise error("the file is empty", where=source, fix="write the YAML content")
+    return data
