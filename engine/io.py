@@ -8,6 +8,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 
+from .errors import FuzzymeshError
 from .mesh import TetMesh
 
 MESHIO_FORMATS = {"vtu": "vtu", "msh": "gmsh"}
@@ -22,8 +23,12 @@ def to_meshio(mesh: TetMesh) -> meshio.Mesh:
 
 def write_atomic(path: Path, write) -> None:
     """Call ``write(temporary_path)``, then rename onto ``path``; no partial file on failure."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    except OSError as exc:
+        raise FuzzymeshError(f"cannot write ({exc.strerror or exc})", where=str(path),
+                             fix="choose a writable output folder") from None
     os.close(fd)
     try:
         write(tmp)

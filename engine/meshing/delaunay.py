@@ -37,6 +37,21 @@ def orient(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return tets, np.abs(vol)
 
 
+def canonical(tets: np.ndarray) -> np.ndarray:
+    """The same tets in a unique order: nodes sorted up to an even permutation, rows sorted.
+
+    Gmsh's kernel returns the tetrahedra in a run-dependent order; this makes
+    the mesh depend on the nodes only (orientation is kept).
+    """
+    order = np.argsort(tets, axis=1)
+    rows = np.take_along_axis(tets, order, axis=1)
+    # parity of the sorting permutation: count inversions among the 4 positions
+    inversions = sum((order[:, i] > order[:, j]).astype(int) for i in range(4) for j in range(i + 1, 4))
+    odd = inversions % 2 == 1
+    rows[odd] = rows[odd][:, [0, 1, 3, 2]]
+    return rows[np.lexsort(rows.T[::-1])]
+
+
 def compact(points, tets, *node_arrays):
     """Drop nodes no tetrahedron uses; renumber."""
     used = np.zeros(len(points), bool)
@@ -56,6 +71,7 @@ def mesh_delaunay(packing, geometry, features) -> TetMesh:
     keep[keep] = geometry.contains(centroids)
     tets = tets[keep]
     points, tets, level, entity = compact(points, tets, packing.level, packing.entity)
+    tets = canonical(tets)
     stats = {"delaunay_tets": total, "outside_or_flat_dropped": int(total - len(tets)),
              "unused_nodes_dropped": int(len(packing) - len(points))}
     return TetMesh(points, tets, level, entity, stats)

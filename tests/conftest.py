@@ -1,0 +1,23 @@
+"""Shared fixtures: built shapes are cached per session (they are immutable in use)."""
+from __future__ import annotations
+
+import functools
+
+import pytest
+
+from engine.features import apply_names, detect_features
+from engine.schema import validate
+from engine.shapes import SHAPES, build_shape
+
+
+@functools.lru_cache(maxsize=None)
+def shape_and_features(kind: str, **parameters):
+    _, schema = SHAPES[kind]
+    shape = build_shape(kind, validate(parameters, schema))
+    features = detect_features(shape.geometry, 30.0, shape.face_groups)
+    return shape, apply_names(features, shape.name_rules, shape.given_curves)
+
+
+@pytest.fixture
+def built():
+    return shape_and_features
