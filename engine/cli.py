@@ -26,16 +26,33 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return value
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Argument errors as one line, like every other error of the CLI."""
+
+    def error(self, message):
+        self.exit(2, f"fuzzymesh: error: {self.prog}: {message}; see '{self.prog} --help'\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="fuzzymesh", description=__import__("engine").__doc__.splitlines()[0])
+    parser = OneLineParser(prog="fuzzymesh", description=__import__("engine").__doc__.splitlines()[0])
     parser.add_argument("--debug", action="store_true", help="show tracebacks of internal errors")
-    commands = parser.add_subparsers(dest="command", required=True)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     mesh = commands.add_parser("mesh", help="mesh a job file (default: the built-in junction example)")
     mesh.add_argument("job", nargs="?", help="job YAML file; omitted: the plate-cylinder junction example")
     mesh.add_argument("--out", type=Path, help="output folder (overrides the job's output.directory)")
     mesh.add_argument("--size", type=_positive_float, help="global element size (overrides the job's size)")
-    mesh.add_argument("--seed", type=int, help="random seed (overrides the job's seed)")
+    mesh.add_argument("--seed", type=_seed, help="random seed >= 0 (overrides the job's seed)")
     mesh.add_argument("--max-elements", type=_positive_float, default=None,
                       help="refuse jobs expected to exceed this many tetrahedra (default 2e7)")
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")

@@ -108,7 +108,8 @@ def load_surface(path: str | Path, *, allow_multiple_solids: bool = False) -> Ge
     try:
         loaded = trimesh.load(str(path), file_type=SURFACE_FORMATS[suffix], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for broken files
-        raise GeometryError(f"cannot read as {suffix[1:].upper()} ({exc.__class__.__name__}: {exc})",
+        detail = "" if isinstance(exc, ImportError) else f" ({exc.__class__.__name__}: {exc})"
+        raise GeometryError(f"not a readable {suffix[1:].upper()} surface{detail}",
                             where=source, fix="check that the file is a valid surface mesh") from None
     if not isinstance(loaded, trimesh.Trimesh):
         raise GeometryError("the file holds no triangle surface", where=source,
@@ -149,8 +150,10 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
     if check_self_intersections:
         _check_self_intersections(mesh, source)
     notes += _orient(mesh, source, allow_multiple_solids)
-    if mesh.volume <= 1e-9 * mesh.scale ** 3:
-        raise GeometryError(f"the surface encloses no volume ({mesh.volume:.3g})", where=source,
+    with np.errstate(divide="ignore", invalid="ignore"):
+        volume = float(mesh.volume)
+    if not volume > 1e-9 * mesh.scale ** 3:
+        raise GeometryError(f"the surface encloses no volume ({volume:.3g})", where=source,
                             fix="give a solid body, not a sheet or a degenerate surface")
     for note in notes:
         log.warning("%s: %s", source, note)

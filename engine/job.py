@@ -12,11 +12,17 @@ from pathlib import Path
 from .errors import JobError
 from .meshing import mesher_names
 from .packing import packer_names
-from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, positive, validate
+from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, non_negative, positive, validate
 from .shapes import SHAPES
 from .yamlfile import Located, load_yaml, located
 
 OUTPUT_FORMATS = ("vtu", "msh")
+
+
+def _plain_name(value):
+    if not value or value.startswith(".") or any(c in value for c in "/\\:"):
+        return f"must be a plain file name without folders, got '{value}'"
+    return None
 
 
 def _formats_ok(value):
@@ -40,10 +46,11 @@ def job_schema() -> dict:
                       doc="global target element size, in model units (default: model size / 40)"),
         "packer": Field(STRING, default="lattice", choices=tuple(packer_names()), doc="node placement method"),
         "mesher": Field(STRING, default="delaunay", choices=tuple(mesher_names()), doc="connection method"),
-        "seed": Field(INTEGER, default=0, doc="random seed; same input and seed give the same mesh"),
+        "seed": Field(INTEGER, default=0, check=non_negative,
+                      doc="random seed >= 0; same input and seed give the same mesh"),
         "output": Field(MAPPING, default=None, doc="where and what to write", fields={
             "directory": Field(STRING, default="out", doc="output folder, relative to the job file"),
-            "name": Field(STRING, default="mesh", doc="base name of the mesh files"),
+            "name": Field(STRING, default="mesh", check=_plain_name, doc="base name of the mesh files"),
             "formats": Field(LIST, default=["vtu", "msh"], items=Field(STRING), check=_formats_ok,
                              doc=f"any of {', '.join(OUTPUT_FORMATS)}"),
         }),
@@ -69,6 +76,15 @@ class Job:
     output_name: str
     output_formats: list[str]
     raw: dict
+
+    def where(self, *keys) -> str:
+        """file:line:col of a key path in the job file (as deep as it exists)."""
+        node, where = self.raw, getattr(self.raw, "where", lambda key=None: self.source)()
+        for key in keys:
+            if not isinstance(node, Located) or key not in node:
+                break
+            where, node = node.where(key), node[key]
+        return where
 
 
 def load_job(path: str | Path) -> Job:
@@ -106,7 +122,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         allow_multiple_solids=geo["allow_multiple_solids"], feature_angle=float(geo["feature_angle"]),
         size=values["size"], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
         output_dir=base_dir / output["directory"], output_name=output["name"],
-        output_formats=list(dict.fromkeys(output["formats"])), raw=dict(data))
+        output_formats=list(dict.fromkeys(output["formats"])), raw=data)
 
 
 def default_job() -> Job:

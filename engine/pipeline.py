@@ -10,6 +10,7 @@ from pathlib import Path
 from .features import Features, apply_names, detect_features
 from .geometry import Geometry, load_surface
 from .io import write_mesh
+from .errors import JobError, LimitError
 from .job import Job
 from .mesh import TetMesh
 from .meshing import get_mesher
@@ -45,7 +46,11 @@ def stage(name: str, timings: dict):
 def build_geometry(job: Job):
     """Geometry, named features and characteristic lengths of the job's solid."""
     if job.shape is not None:
-        shape = build_shape(job.shape, job.shape_parameters)
+        try:
+            shape = build_shape(job.shape, job.shape_parameters)
+        except JobError as error:
+            error.where = error.where or job.where("geometry", "parameters")
+            raise JobError(error.what, where=error.where, fix=error.fix) from None
         features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
     geometry = load_surface(job.geometry_file, allow_multiple_solids=job.allow_multiple_solids)
@@ -63,7 +68,10 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     with stage("sizing", timings):
         size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
         sizing = UniformSize(size)
-        expected = check_element_limit(geometry, sizing, max_elements)
+        try:
+            expected = check_element_limit(geometry, sizing, max_elements)
+        except LimitError as error:
+            raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
     log.info("sizing: uniform h = %.4g, about %.3g tetrahedra expected (%.2f s)", size, expected, timings["sizing"])
     with stage("packing", timings):
         packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import JobError
 from .geometry import Geometry, validate_surface
-from .schema import NUMBER, STRING, Field, non_negative, positive
+from .schema import NUMBER, STRING, Field, finite, non_negative, positive
 
 CHORDAL_ERROR = 1e-3  # sagitta / radius
 
@@ -271,12 +271,12 @@ SHAPES = {
     "plate_with_hole": (plate_with_hole, {
         "length": _p(200.0, "plate length (x)"), "width": _p(100.0, "plate width (y)"),
         "thickness": _p(10.0, "plate thickness (z)"), "hole_radius": _p(10.0, "hole radius"),
-        "hole_x": _p(0.0, "hole centre x", None), "hole_y": _p(0.0, "hole centre y", None)}),
+        "hole_x": _p(0.0, "hole centre x", finite), "hole_y": _p(0.0, "hole centre y", finite)}),
     "plate_cylinder_junction": (plate_cylinder_junction, {
         "length": _p(200.0, "plate length (x)"), "width": _p(200.0, "plate width (y)"),
         "thickness": _p(20.0, "plate thickness (z)"), "radius": _p(25.0, "cylinder radius"),
         "height": _p(100.0, "cylinder height above the plate"),
-        "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", None)}),
+        "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", finite)}),
     "l_bracket": (l_bracket, {
         "leg_length": _p(80.0, "base leg length (x)"), "leg_height": _p(80.0, "upright leg height (z)"),
         "thickness": _p(15.0, "leg thickness"), "width": _p(40.0, "extrusion width (y)"),

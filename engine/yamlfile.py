@@ -6,11 +6,14 @@ itself and of each of its keys. Errors can then name ``file:line:col``.
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
 
 from .errors import FuzzymeshError
+
+FLOAT_1_2 = re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$")
 
 
 class Located(dict):
@@ -45,9 +48,13 @@ def located(data, source: str = "<dict>"):
     return data
 
 
-def _loader_for(source: str):
+def _loader_for(source: str, error=FuzzymeshError):
     class LocatingLoader(yaml.SafeLoader):
         pass
+
+    # YAML 1.2 floats: 1e-3 and 2.5e0 are numbers, not strings (PyYAML follows YAML 1.1)
+    LocatingLoader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+    LocatingLoader.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_1_2, list("-+0123456789."))
 
     def construct_mapping(loader, node, deep=False):
         loader.flatten_mapping(node)
@@ -59,12 +66,12 @@ def _loader_for(source: str):
             try:
                 hash(key)
             except TypeError:
-                raise FuzzymeshError(
+                raise error(
                     "a mapping key must be a plain value",
                     where=f"{source}:{key_node.start_mark.line + 1}:{key_node.start_mark.column + 1}",
                 )
             if key in mapping:
-                raise FuzzymeshError(
+                raise error(
                     f"duplicate key '{key}'",
                     where=f"{source}:{key_node.start_mark.line + 1}:{key_node.start_mark.column + 1}",
                     fix="each key may appear once in a mapping",
@@ -80,7 +87,12 @@ def _loader_for(source: str):
 def parse_yaml(text: str, source: str, error=FuzzymeshError):
     """Parse YAML text with safe loading; syntax errors become one-line ``error``s."""
     try:
-        return yaml.load(text, Loader=_loader_for(source))  # noqa: S506 - SafeLoader subclass
+        return yaml.load(text, Loader=_loader_for(source, error))  # noqa: S506 - SafeLoader subclass
+    except yaml.constructor.ConstructorError as exc:
+        mark = exc.problem_mark
+        where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
+        raise error(f"unsupported YAML tag: {exc.problem}", where=where,
+                    fix="remove the tag; only plain YAML values are read") from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source

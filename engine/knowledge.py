@@ -1,0 +1,601 @@
+"""The knowledge base: rule bases, patterns, recipes, feature kinds and sizing defaults.
+
+Every file is YAML with a ``kind:`` key (``rules``, ``pattern``, ``recipe``,
+``features``, ``sizing``), read with safe loading. Loading is strict: each
+error is one line ``file:line:col: what is wrong; what is allowed`` (a
+:class:`~engine.errors.KnowledgeError`). See ``docs/rules.md`` for the formats.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import FuzzymeshError, KnowledgeError
+from .expr import Expression, ExpressionError
+from .fuzzy import Rule, RuleBase, Term, Variable
+from .schema import INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, positive, validate
+from .yamlfile import Located, load_yaml
+
+FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
+ANCHORS = ("point", "curve", "surface", "region", "domain")
+LAWS = ("constant", "linear", "geometric", "power")
+SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap")
+FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "named"),
+                 "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
+COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
+
+
+def _err(what, where, fix=None):
+    return KnowledgeError(what, where=where, fix=fix)
+
+
+def _expression(value, names: set[str], where: str) -> Expression:
+    try:
+        return Expression(value, names)
+    except ExpressionError as exc:
+        raise _err(str(exc), where, "use numbers, parameter names, + - * / **, min(), max()") from None
+
+
+# ----------------------------------------------------------------------------------- rule bases
+
+def _terms_ok(value):
+    if not value:
+        return "needs at least one term"
+    return None
+
+
+VARIABLE = {
+    "universe": Field(LIST, required=True, items=Field(NUMBER), doc="[low, high]"),
+    "terms": Field(MAPPING, required=True, open_keys=True, check=_terms_ok,
+                   doc="LABEL: [a, b, c, d] trapezoid or [a, b, c] triangle"),
+    "default": Field(NUMBER, doc="output value when no rule fires (outputs only)"),
+    "doc": Field(STRING, default=""),
+}
+RULE = {
+    "id": Field(STRING, required=True, doc="a unique rule id, cited by the audit"),
+    "if": Field(MAPPING, required=True, open_keys=True, doc="{input: LABEL, ...} joined by AND"),
+    "then": Field(MAPPING, required=True, open_keys=True, doc="{output: LABEL}"),
+    "doc": Field(STRING, default=""),
+}
+RULEBASE = {
+    "doc": Field(STRING, default=""),
+    "inputs": Field(MAPPING, required=True, open_keys=True, doc="input variables"),
+    "outputs": Field(MAPPING, required=True, open_keys=True, doc="output variables"),
+    "rules": Field(LIST, required=True, doc="a list of rules"),
+    "resolution": Field(INTEGER, default=101, check=in_range(11, 10001), doc="output samples for the centroid"),
+    "action": Field(MAPPING, open_keys=True, doc="{output: NAME, threshold: NUMBER}: act where output >= threshold"),
+}
+RULES_FILE = {
+    "kind": Field(STRING, required=True),
+    "id": Field(STRING, required=True, doc="the rule file's id"),
+    "doc": Field(STRING, default=""),
+    "rulebases": Field(MAPPING, required=True, open_keys=True, doc="NAME: rule base"),
+}
+
+
+def _variable(name, raw: Located, is_output: bool, rb_id: str) -> Variable:
+    spec = validate(raw, VARIABLE, KnowledgeError, f"{rb_id}.{name}")
+    universe = spec["universe"]
+    if len(universe) != 2 or not universe[0] < universe[1]:
+        raise _err(f"universe of '{name}' must be [low, high] with low < high", raw.where("universe"))
+    lo, hi = universe
+    terms = {}
+    for label, points in raw["terms"].items():
+        where = raw["terms"].where(label)
+        if not isinstance(points, list) or len(points) not in (3, 4) or \
+                not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in points):
+            raise _err(f"term '{label}' of '{name}' must be 3 or 4 numbers", where,
+                       "give [a, b, c, d] (trapezoid) or [a, b, c] (triangle)")
+        if len(points) == 3:
+            points = [points[0], points[1], points[1], points[2]]
+        if not all(points[i] <= points[i + 1] for i in range(3)):
+            raise _err(f"term '{label}' of '{name}' needs a <= b <= c <= d, got {points}", where)
+        if points[0] < lo or points[3] > hi:
+            raise _err(f"term '{label}' of '{name}' reaches outside the universe [{lo}, {hi}]", where,
+                       "keep the term's points inside the universe (inputs are clipped to it)")
+        terms[str(label)] = Term(str(label), tuple(float(p) for p in points))
+    if is_output and spec["default"] is None:
+        raise _err(f"output '{name}' has no default", raw.where(), "add 'default:' (the value when no rule fires)")
+    if not is_output and spec["default"] is not None:
+        raise _err(f"input '{name}' cannot have a default", raw.where("default"), "remove it; inputs are measured")
+    if is_output and not lo <= spec["default"] <= hi:
+        raise _err(f"default of '{name}' lies outside its universe", raw.where("default"))
+    return Variable(str(name), (float(lo), float(hi)), terms, spec["default"])
+
+
+def _rulebase(name, raw: Located, file_id: str) -> RuleBase:
+    rb_id = f"{file_id}.{name}"
+    spec = validate(raw, RULEBASE, KnowledgeError, rb_id)
+    inputs = {str(k): _variable(k, v, False, rb_id) for k, v in raw["inputs"].items() if _is_map(v, raw["inputs"], k)}
+    outputs = {str(k): _variable(k, v, True, rb_id) for k, v in raw["outputs"].items() if _is_map(v, raw["outputs"], k)}
+    if not inputs or not outputs:
+        raise _err(f"rule base '{rb_id}' needs at least one input and one output", raw.where())
+    rules, seen = [], {}
+    for item in raw["rules"]:
+        if not isinstance(item, Located):
+            raise _err("each rule must be a mapping with id, if, then", raw.where("rules"))
+        rule = validate(item, RULE, KnowledgeError, f"{rb_id} rule")
+        if rule["id"] in seen:
+            raise _err(f"duplicate rule id '{rule['id']}' (first at {seen[rule['id']]})", item.where("id"))
+        seen[rule["id"]] = item.where("id")
+        conditions = _clauses(item["if"], inputs, "input", item.where("if"))
+        conclusions = _clauses(item["then"], outputs, "output", item.where("then"))
+        rules.append(Rule(rule["id"], conditions, conclusions, item.where()))
+    if not rules:
+        raise _err(f"rule base '{rb_id}' has no rules", raw.where("rules"))
+    extra = {}
+    if spec["action"] is not None:
+        action = validate(raw["action"], {"output": Field(STRING, required=True, choices=tuple(outputs)),
+                                          "threshold": Field(NUMBER, required=True),
+                                          "doc": Field(STRING, default="")}, KnowledgeError, f"{rb_id}.action")
+        extra["action"] = action
+    base = RuleBase(rb_id, inputs, outputs, rules, spec["resolution"], raw.where(), extra)
+    _check_coverage(base, raw.where("rules"))
+    return base
+
+
+def _is_map(value, parent: Located, key) -> bool:
+    if not isinstance(value, Located):
+        raise _err(f"'{key}' must be a mapping (universe, terms)", parent.where(key))
+    return True
+
+
+def _clauses(raw: Located, variables: dict, role: str, where: str):
+    if not raw:
+        raise _err(f"a rule needs at least one {role} clause", where)
+    clauses = []
+    for var, label in raw.items():
+        if var not in variables:
+            raise _err(f"unknown {role} '{var}'", raw.where(var), f"known {role}s: {', '.join(variables)}")
+        if label not in variables[var].terms:
+            raise _err(f"label '{label}' is not defined for {role} '{var}'", raw.where(var),
+                       f"defined labels: {', '.join(variables[var].terms)}")
+        clauses.append((str(var), str(label)))
+    return tuple(clauses)
+
+
+def _check_coverage(base: RuleBase, where: str) -> None:
+    """Every point of the input space must fire at least one rule."""
+    axes = []
+    for var in base.inputs.values():
+        breaks = [p for t in var.terms.values() for p in t.points]
+        grid = np.unique(np.concatenate([np.linspace(*var.universe, COVERAGE_SAMPLES), breaks]))
+        axes.append(grid)
+    if np.prod([len(a) for a in axes]) > 4_000_000:
+        axes = [np.linspace(*v.universe, 101) for v in base.inputs.values()]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    values = {name: m.ravel() for name, m in zip(base.inputs, mesh)}
+    fired = base.firing(values).max(axis=1) > 0
+    if not fired.all():
+        bad = np.flatnonzero(~fired)[0]
+        at = ", ".join(f"{name} = {values[name][bad]:.6g}" for name in base.inputs)
+        raise _err(f"rule base '{base.id}': no rule fires at {at}", where,
+                   "add a term or a rule that covers this input, so no input is silently ignored")
+
+
+def load_rules(raw: Located, source: str) -> dict[str, RuleBase]:
+    spec = validate(raw, RULES_FILE, KnowledgeError)
+    bases = {}
+    for name, body in raw["rulebases"].items():
+        if not isinstance(body, Located):
+            raise _err(f"rule base '{name}' must be a mapping", raw["rulebases"].where(name))
+        bases[f"{spec['id']}.{name}"] = _rulebase(name, body, spec["id"])
+    return bases
+
+
+# ------------------------------------------------------------------------------------- patterns
+
+@dataclass
+class Zone:
+    """One part of a pattern: a distance, a spacing law h(d) and a membership mu(d)."""
+
+    id: str
+    distance: str                 # "anchor" or "ligament:<role>"
+    law: str
+    near: Expression
+    far: Expression | None
+    over: Expression | None
+    exponent: Expression | None
+    trapezoid: tuple[Expression, Expression, Expression, Expression] | None   # None: constant membership
+    height: Expression
+    active_if: Expression | None
+    source: str
+
+
+@dataclass
+class Parameter:
+    default: float | None
+    doc: str
+    source: str
+
+
+@dataclass
+class Pattern:
+    name: str
+    doc: str
+    anchor: str
+    accepts: list[str]
+    scale: str
+    parameters: dict[str, Parameter]
+    roles: dict[str, tuple[str | None, str]]
+    zones: list[Zone]
+    source: str
+
+    def expression_names(self) -> set[str]:
+        names = set(self.parameters) | {"H"}
+        if self.scale != "none":
+            names.add("L")
+        return names
+
+
+PATTERN_FILE = {
+    "kind": Field(STRING, required=True),
+    "name": Field(STRING, required=True, doc="the pattern's name, used by recipes and jobs"),
+    "doc": Field(STRING, required=True, doc="what the pattern is for, shown by 'fuzzymesh patterns show'"),
+    "anchor": Field(STRING, required=True, choices=ANCHORS, doc="what the pattern is placed on"),
+    "accepts": Field(LIST, default=[], items=Field(STRING), doc="feature kinds 'every:' may place it on"),
+    "scale": Field(STRING, default="none", choices=SCALES, doc="what the length L in expressions is"),
+    "parameters": Field(MAPPING, default={}, open_keys=True, doc="NAME: {default: NUMBER, doc: TEXT}"),
+    "roles": Field(MAPPING, default={}, open_keys=True, doc="other features the pattern uses: ROLE: {default, doc}"),
+    "zones": Field(LIST, required=True, doc="one or more zones"),
+}
+PARAMETER = {"default": Field(NUMBER, doc="the value when the placement gives none"),
+             "doc": Field(STRING, required=True, doc="what the parameter means")}
+ROLE = {"default": Field(STRING, doc="feature name used when the placement gives none"),
+        "doc": Field(STRING, required=True)}
+ZONE = {
+    "id": Field(STRING, required=True, doc="the zone's id, cited by the audit"),
+    "distance": Field(STRING, default="anchor", doc="'anchor' or 'ligament: ROLE'"),
+    "size": Field(MAPPING, required=True, fields={
+        "law": Field(STRING, required=True, choices=LAWS),
+        "near": Field((NUMBER, STRING), required=True, doc="h at distance 0"),
+        "far": Field((NUMBER, STRING), doc="h at distance 'over' and beyond"),
+        "over": Field((NUMBER, STRING), doc="distance over which h goes from near to far"),
+        "exponent": Field((NUMBER, STRING), doc="power law exponent"),
+    }),
+    "membership": Field(MAPPING, required=True, fields={
+        "trapezoid": Field(LIST, doc="[a, b, c, d] over the distance"),
+        "constant": Field((NUMBER, STRING), doc="the same membership everywhere"),
+        "height": Field((NUMBER, STRING), default=1.0, doc="membership at the top of the trapezoid"),
+    }),
+    "active_if": Field(STRING, doc="an expression; the zone applies only where it is > 0"),
+    "doc": Field(STRING, default=""),
+}
+
+
+def load_pattern(raw: Located, source: str) -> Pattern:
+    spec = validate(raw, PATTERN_FILE, KnowledgeError)
+    params = {}
+    for name, body in raw["parameters"].items() if "parameters" in raw else []:
+        if not str(name).isidentifier() or name in ("H", "L"):
+            raise _err(f"parameter name '{name}' is not allowed", raw["parameters"].where(name),
+                       "use a letter-and-underscore name other than H and L")
+        p = validate(body, PARAMETER, KnowledgeError, f"parameters.{name}")
+        params[str(name)] = Parameter(p["default"], p["doc"], raw["parameters"].where(name))
+    roles = {}
+    for name, body in raw["roles"].items() if "roles" in raw else []:
+        if not str(name).isidentifier():
+            raise _err(f"role name '{name}' is not an identifier", raw["roles"].where(name))
+        r = validate(body, ROLE, KnowledgeError, f"roles.{name}")
+        roles[str(name)] = (r["default"], r["doc"])
+    pattern = Pattern(spec["name"], spec["doc"], spec["anchor"], spec["accepts"], spec["scale"], params, roles,
+                      [], source)
+    names = pattern.expression_names()
+    gap_names = names | {f"gap_{role}" for role in roles}
+    if not spec["zones"]:
+        raise _err("a pattern needs at least one zone", raw.where("zones"))
+    seen = set()
+    for body in raw["zones"]:
+        if not isinstance(body, Located):
+            raise _err("each zone must be a mapping", raw.where("zones"))
+        pattern.zones.append(_zone(body, names, gap_names, roles, seen))
+    return pattern
+
+
+def _zone(body: Located, names, gap_names, roles, seen) -> Zone:
+    z = validate(body, ZONE, KnowledgeError, "zone")
+    if z["id"] in seen:
+        raise _err(f"duplicate zone id '{z['id']}'", body.where("id"))
+    seen.add(z["id"])
+    distance = z["distance"].replace(" ", "")
+    if distance != "anchor":
+        role = distance.split(":", 1)[1] if distance.startswith("ligament:") else None
+        if role not in roles:
+            raise _err(f"distance '{z['distance']}' is not known", body.where("distance"),
+                       f"use 'anchor' or 'ligament: ROLE' with a declared role ({', '.join(roles) or 'none declared'})")
+    size, raw_size = z["size"], body["size"]
+    needs = {"constant": (), "linear": ("far", "over"), "geometric": ("far", "over"),
+             "power": ("far", "over", "exponent")}[size["law"]]
+    for key in needs:
+        if size[key] is None:
+            raise _err(f"law '{size['law']}' needs '{key}'", raw_size.where(), f"add '{key}:'")
+    expr = {k: _expression(size[k], names, raw_size.where(k)) if size[k] is not None else None
+            for k in ("near", "far", "over", "exponent")}
+    member, raw_member = z["membership"], body["membership"]
+    if (member["trapezoid"] is None) == (member["constant"] is None):
+        raise _err("membership needs exactly one of 'trapezoid' or 'constant'", raw_member.where())
+    if member["trapezoid"] is not None:
+        if len(member["trapezoid"]) != 4:
+            raise _err("a trapezoid has four points [a, b, c, d]", raw_member.where("trapezoid"))
+        trapezoid = tuple(_expression(v, names, raw_member.where("trapezoid")) for v in member["trapezoid"])
+        height = _expression(member["height"], names, raw_member.where("height" if "height" in raw_member else None))
+    else:
+        trapezoid = None
+        height = _expression(member["constant"], names, raw_member.where("constant"))
+    active = _expression(z["active_if"], gap_names, body.where("active_if")) if z["active_if"] else None
+    return Zone(z["id"], distance, size["law"], expr["near"], expr["far"], expr["over"], expr["exponent"],
+                trapezoid, height, active, body.where())
+
+
+# -------------------------------------------------------------------------------------- recipes
+
+PLACEMENT = {
+    "pattern": Field(STRING, required=True, doc="a pattern name (fuzzymesh patterns list)"),
+    "id": Field(STRING, doc="the placement's id, cited by the audit"),
+    "at": Field(STRING, doc="a feature name, e.g. junction"),
+    "every": Field(STRING, doc="a feature kind, e.g. hole"),
+    "point": Field(LIST, items=Field(NUMBER), doc="[x, y, z] for point patterns"),
+    "region": Field(MAPPING, open_keys=True, doc="{box: {min, max}} | {sphere: {centre, radius}} | "
+                                                 "{cylinder: {start, end, radius}}"),
+    "roles": Field(MAPPING, default={}, open_keys=True, doc="ROLE: feature name"),
+    "parameters": Field(MAPPING, default={}, open_keys=True, doc="PARAMETER: number"),
+    "scale": Field(NUMBER, check=positive, doc="the length L, overriding the one taken from the feature"),
+}
+
+
+@dataclass
+class Placement:
+    """A pattern placed by a recipe or a job, before it is bound to features."""
+
+    pattern: str
+    id: str
+    at: str | None
+    every: str | None
+    point: list | None
+    region: dict | None
+    roles: dict
+    parameters: dict
+    scale: float | None
+    source: str
+    origin: str              # "recipe NAME" or "job"
+
+
+def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Placement]:
+    if not isinstance(raw_list, list):
+        raise _err("placements must be a list", where)
+    placements = []
+    for index, body in enumerate(raw_list):
+        if not isinstance(body, Located):
+            raise _err("each placement must be a mapping with 'pattern:'", where)
+        p = validate(body, PLACEMENT, KnowledgeError, "placement")
+        given = [k for k in ("at", "every", "point", "region") if p[k] is not None]
+        if len(given) > 1:
+            raise _err(f"a placement takes one of at / every / point / region, got {', '.join(given)}",
+                       body.where(given[1]))
+        if p["point"] is not None and len(p["point"]) != 3:
+            raise _err("'point' needs three coordinates [x, y, z]", body.where("point"))
+        for name, value in p["parameters"].items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+                raise _err(f"parameter '{name}' must be a finite number", body["parameters"].where(name))
+        placements.append(Placement(p["pattern"], p["id"] or f"{prefix}[{index}]", p["at"], p["every"], p["point"],
+                                    p["region"], dict(p["roles"]), dict(p["parameters"]), p["scale"],
+                                    body.where(), origin))
+    return placements
+
+
+@dataclass
+class Recipe:
+    name: str
+    doc: str
+    placements: list[Placement]
+    source: str
+
+
+RECIPE_FILE = {
+    "kind": Field(STRING, required=True),
+    "name": Field(STRING, required=True),
+    "doc": Field(STRING, required=True, doc="what analysis the recipe is for"),
+    "place": Field(LIST, required=True, doc="the placements"),
+}
+
+
+def load_recipe(raw: Located, source: str) -> Recipe:
+    spec = validate(raw, RECIPE_FILE, KnowledgeError)
+    placements = load_placements(raw["place"], raw.where("place"), f"recipe {spec['name']}",
+                                 f"{spec['name']}/place")
+    if not placements:
+        raise _err("a recipe needs at least one placement", raw.where("place"))
+    return Recipe(spec["name"], spec["doc"], placements, source)
+
+
+# ---------------------------------------------------------------------------- feature kinds etc.
+
+@dataclass
+class FeatureKind:
+    name: str
+    of: str
+    tests: dict
+    doc: str
+    source: str
+
+
+FEATURE_KIND = {"of": Field(STRING, required=True, choices=("curve", "patch")),
+                "when": Field(MAPPING, required=True, open_keys=True, doc="TEST: value"),
+                "doc": Field(STRING, required=True)}
+
+
+def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
+    spec = validate(raw, {"kind": Field(STRING, required=True), "doc": Field(STRING, default=""),
+                          "kinds": Field(MAPPING, required=True, open_keys=True)}, KnowledgeError)
+    kinds = {}
+    for name, body in raw["kinds"].items():
+        k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}")
+        allowed = FEATURE_TESTS[k["of"]]
+        for test, value in body["when"].items():
+            if test not in allowed:
+                raise _err(f"unknown test '{test}' for a {k['of']}", body["when"].where(test),
+                           f"tests for a {k['of']}: {', '.join(allowed)}")
+            want = str if test == "named" else bool
+            if not isinstance(value, want):
+                raise _err(f"test '{test}' takes {'a feature name' if want is str else 'true or false'}",
+                           body["when"].where(test))
+        kinds[str(name)] = FeatureKind(str(name), k["of"], dict(body["when"]), k["doc"], raw["kinds"].where(name))
+    del spec
+    return kinds
+
+
+SIZING_FILE = {
+    "kind": Field(STRING, required=True),
+    "doc": Field(STRING, default=""),
+    "gradation": Field(NUMBER, default=1.3, check=in_range(1.01, 3.0),
+                       doc="the largest ratio of sizes one element apart: h(y) <= h(x) + (g - 1)|x - y|"),
+    "base_pattern": Field(STRING, default="uniform-domain", doc="the pattern placed when a job places none"),
+}
+
+
+# ------------------------------------------------------------------------------ knowledge base
+
+@dataclass
+class KnowledgeBase:
+    rulebases: dict[str, RuleBase] = field(default_factory=dict)
+    patterns: dict[str, Pattern] = field(default_factory=dict)
+    recipes: dict[str, Recipe] = field(default_factory=dict)
+    feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
+    sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain"})
+    sources: dict[str, str] = field(default_factory=dict)   # item id -> file:line
+
+    def add_file(self, path: Path) -> None:
+        raw = load_yaml(path, KnowledgeError)
+        source = str(path)
+        if not isinstance(raw, Located):
+            raise _err("a knowledge file must be a YAML mapping with 'kind:'", source)
+        kind = raw.get("kind")
+        if kind not in FILE_KINDS:
+            raise _err(f"unknown or missing kind '{kind}'" if kind else "missing 'kind:'",
+                       raw.where("kind") if "kind" in raw else raw.where(), f"kind is one of: {', '.join(FILE_KINDS)}")
+        if kind == "rules":
+            for rb_id, base in load_rules(raw, source).items():
+                self._unique(self.rulebases, rb_id, base, base.source)
+        elif kind == "pattern":
+            pattern = load_pattern(raw, source)
+            self._unique(self.patterns, pattern.name, pattern, raw.where("name"))
+        elif kind == "recipe":
+            recipe = load_recipe(raw, source)
+            self._unique(self.recipes, recipe.name, recipe, raw.where("name"))
+        elif kind == "features":
+            for name, fk in load_feature_kinds(raw, source).items():
+                self._unique(self.feature_kinds, name, fk, fk.source)
+        else:
+            self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
+
+    def _unique(self, table: dict, key: str, value, where: str) -> None:
+        if key in table:
+            first = getattr(table[key], "source", "")
+            raise _err(f"'{key}' is defined twice (also in {first})", where, "give each a unique name")
+        table[key] = value
+
+    def check(self) -> None:
+        """Cross-file checks: recipes name existing patterns, parameters and roles."""
+        for recipe in self.recipes.values():
+            for placement in recipe.placements:
+                check_placement(self, placement)
+        if self.sizing["base_pattern"] not in self.patterns and self.patterns:
+            raise _err(f"base pattern '{self.sizing['base_pattern']}' is not in the pattern library",
+                       "sizing", "name an existing pattern")
+
+
+def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
+    """The placement's pattern, after checking its parameters, roles and anchor keys."""
+    pattern = kb.patterns.get(placement.pattern)
+    if pattern is None:
+        raise _err(f"unknown pattern '{placement.pattern}'", placement.source,
+                   f"known patterns: {', '.join(sorted(kb.patterns))}")
+    for name in placement.parameters:
+        if name not in pattern.parameters:
+            raise _err(f"pattern '{pattern.name}' has no parameter '{name}'", placement.source,
+                       f"its parameters: {', '.join(pattern.parameters) or 'none'}")
+    for name in placement.roles:
+        if name not in pattern.roles:
+            raise _err(f"pattern '{pattern.name}' has no role '{name}'", placement.source,
+                       f"its roles: {', '.join(pattern.roles) or 'none'}")
+    missing = [n for n, p in pattern.parameters.items() if p.default is None and n not in placement.parameters]
+    if missing:
+        raise _err(f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}", placement.source,
+                   "give them under 'parameters:'")
+    anchor_key = {"point": ("point", "at"), "curve": ("at", "every"), "surface": ("at", "every"),
+                  "region": ("region",), "domain": ()}[pattern.anchor]
+    given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
+    if pattern.anchor == "domain" and given:
+        raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'", placement.source)
+    if pattern.anchor != "domain" and (not given or given[0] not in anchor_key):
+        raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) needs one of: {', '.join(anchor_key)}",
+                   placement.source)
+    if placement.every is not None and kb.feature_kinds and placement.every not in kb.feature_kinds:
+        raise _err(f"unknown feature kind '{placement.every}'", placement.source,
+                   f"known kinds: {', '.join(sorted(kb.feature_kinds))}")
+    return pattern
+
+
+def default_paths() -> list[Path]:
+    """The shipped knowledge/ and patterns/ folders (installed wheel or source checkout)."""
+    here = Path(__file__).resolve().parent
+    installed = here / "_data"
+    root = installed if installed.is_dir() else here.parent
+    return [root / "knowledge", root / "patterns"]
+
+
+def yaml_files(paths) -> list[Path]:
+    files = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            files += sorted(p for p in path.rglob("*") if p.suffix in (".yaml", ".yml"))
+        else:
+            files.append(path)
+    return files
+
+
+def load_knowledge(extra_paths=()) -> KnowledgeBase:
+    """The default knowledge base plus ``extra_paths`` (files or folders)."""
+    kb = KnowledgeBase()
+    for path in yaml_files([*default_paths(), *extra_paths]):
+        kb.add_file(path)
+    kb.check()
+    return kb
+
+
+def lint(paths) -> list[str]:
+    """One error line per broken file (and for cross-file problems); empty when all is well."""
+    errors = []
+    kb = KnowledgeBase()
+    files = yaml_files(paths)
+    for path in files:
+        if not path.exists():
+            errors.append(f"{path}: file not found; check the path")
+            continue
+        try:
+            kb.add_file(path)
+        except FuzzymeshError as exc:
+            errors.append(exc.one_line())
+    if not errors:
+        # cross-check recipes against the default patterns plus the linted ones
+        base = KnowledgeBase()
+        for path in yaml_files(default_paths()):
+            if path.resolve() not in {f.resolve() for f in files}:
+                try:
+                    base.add_file(path)
+                except FuzzymeshError:
+                    pass
+        for table in ("patterns", "feature_kinds"):
+            merged = {**getattr(base, table), **getattr(kb, table)}
+            setattr(kb, table, merged)
+        try:
+            kb.check()
+        except FuzzymeshError as exc:
+            errors.append(exc.one_line())
+    return errors
+
+
+__all__ = ["KnowledgeBase", "Pattern", "Zone", "Recipe", "Placement", "FeatureKind", "load_knowledge", "lint",
+           "load_placements", "check_placement", "default_paths"]
