@@ -57,7 +57,103 @@ def build_parser() -> argparse.ArgumentParser:
                       help="refuse jobs expected to exceed this many tetrahedra (default 2e7)")
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
     mesh.set_defaults(run=_cmd_mesh)
+
+    lint = commands.add_parser("lint", help="check rule, pattern, recipe and feature files")
+    lint.add_argument("paths", nargs="*", type=Path, help="files or folders (default: the shipped knowledge base)")
+    lint.set_defaults(run=_cmd_lint)
+
+    explain = commands.add_parser("explain", help="explain the element size at a point of a job")
+    explain.add_argument("job", help="job YAML file")
+    explain.add_argument("--at", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"))
+    explain.set_defaults(run=_cmd_explain)
+
+    for noun in ("patterns", "recipes"):
+        sub = commands.add_parser(noun, help=f"list or show the {noun} of the knowledge base")
+        verbs = sub.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
+        verbs.add_parser("list", help=f"list the {noun}")
+        show = verbs.add_parser("show", help=f"show one of the {noun}")
+        show.add_argument("name")
+        sub.add_argument("--knowledge", type=Path, action="append", default=[],
+                         help="extra knowledge files or folders")
+        sub.set_defaults(run=_cmd_library, noun=noun)
     return parser
+
+
+def _cmd_lint(args) -> int:
+    from .knowledge import default_paths, lint
+
+    paths = args.paths or default_paths()
+    errors = lint(paths)
+    for line in errors:
+        print(line)
+    if errors:
+        return 1
+    print(f"ok: {', '.join(map(str, paths))}")
+    return 0
+
+
+def _cmd_explain(args) -> int:
+    from .job import load_job
+    from .knowledge import load_knowledge
+    from .pipeline import build_geometry, build_sizing
+    from .explain import explain_point
+
+    logging.getLogger().setLevel(logging.WARNING)
+    job = load_job(args.job)
+    geometry, features = build_geometry(job)
+    sizing = build_sizing(job, geometry, features, load_knowledge(job.knowledge))
+    inside = bool(geometry.contains([args.at])[0])
+    print(explain_point(sizing, args.at, inside))
+    return 0
+
+
+def _cmd_library(args) -> int:
+    from .knowledge import load_knowledge
+
+    kb = load_knowledge(args.knowledge)
+    table = kb.patterns if args.noun == "patterns" else kb.recipes
+    if args.verb == "list":
+        for name, item in sorted(table.items()):
+            summary = " ".join(item.doc.split())
+            print(f"{name:22s} {summary[:90]}{'...' if len(summary) > 90 else ''}")
+        return 0
+    if args.name not in table:
+        raise FuzzymeshError(f"no {args.noun[:-1]} named '{args.name}'",
+                             fix=f"known {args.noun}: {', '.join(sorted(table))}")
+    print(_describe_pattern(table[args.name]) if args.noun == "patterns" else _describe_recipe(table[args.name]))
+    return 0
+
+
+def _describe_pattern(pattern) -> str:
+    lines = [f"pattern {pattern.name}  ({pattern.source})", "", " ".join(pattern.doc.split()), "",
+             f"anchor: {pattern.anchor}" + (f"; placed by 'every:' on {', '.join(pattern.accepts)}"
+                                             if pattern.accepts else ""),
+             f"L (scale): {pattern.scale}; H: the job's global size"]
+    if pattern.parameters:
+        lines.append("parameters:")
+        for name, p in pattern.parameters.items():
+            default = "required" if p.default is None else f"default {p.default:g}"
+            lines.append(f"  {name} ({default}): {p.doc}")
+    for role, (default, doc) in pattern.roles.items():
+        lines.append(f"role {role} (default feature '{default}'): {doc}")
+    for zone in pattern.zones:
+        lines.append(f"zone {zone.id} ({zone.source}): distance {zone.distance}, {zone.law} size law "
+                     f"near = {zone.near.text}" + (f", far = {zone.far.text}, over = {zone.over.text}" if zone.far else "")
+                     + (f"; membership trapezoid [{', '.join(e.text for e in zone.trapezoid)}]"
+                        if zone.trapezoid else "; constant membership")
+                     + f", height {zone.height.text}" + (f"; active if {zone.active_if.text} > 0" if zone.active_if else ""))
+    return "\n".join(lines)
+
+
+def _describe_recipe(recipe) -> str:
+    lines = [f"recipe {recipe.name}  ({recipe.source})", "", " ".join(recipe.doc.split()), "", "places:"]
+    for p in recipe.placements:
+        where = (f"at '{p.at}'" if p.at else f"on every {p.every}" if p.every else
+                 f"at {p.point}" if p.point else f"in {p.region}" if p.region else "over the whole solid")
+        extra = "".join(f", {k} = {v}" for k, v in p.parameters.items())
+        roles = "".join(f", {k} -> '{v}'" for k, v in p.roles.items())
+        lines.append(f"  {p.pattern} {where}{extra}{roles}  ({p.source})")
+    return "\n".join(lines)
 
 
 def _cmd_mesh(args) -> int:

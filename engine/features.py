@@ -28,6 +28,17 @@ class Circle:
     radius: float
 
 
+@dataclass(frozen=True)
+class Cylinder:
+    """A patch that lies on a cylinder; ``concave`` when the material is outside it."""
+
+    point: np.ndarray
+    axis: np.ndarray
+    radius: float
+    concave: bool
+    full_turn: bool
+
+
 @dataclass
 class Corner:
     id: str
@@ -48,6 +59,8 @@ class Curve:
     circle: Circle | None = None
     names: list[str] = field(default_factory=list)
     on_surface: bool = True
+    sharp: bool = True              # False for borders of face groups that meet smoothly
+    kinds: list[str] = field(default_factory=list)
 
     @property
     def polyline(self) -> np.ndarray:
@@ -85,7 +98,9 @@ class Patch:
     centroid: np.ndarray
     vertices: np.ndarray   # (k, 3) coordinates of the patch's vertices
     planar: bool
+    cylinder: Cylinder | None = None
     names: list[str] = field(default_factory=list)
+    kinds: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -95,6 +110,10 @@ class Features:
     patches: list[Patch]
     face_patch: np.ndarray   # patch index of every surface face
     feature_angle: float
+    lengths: dict = field(default_factory=dict)   # characteristic lengths given by a shape
+
+    def of_kind(self, kind: str) -> list:
+        return [f for group in (self.curves, self.patches) for f in group if kind in f.kinds]
 
     def by_id(self, feature_id: str):
         for group in (self.corners, self.curves, self.patches):
@@ -126,11 +145,12 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     group = np.zeros(len(mesh.faces), dtype=int)
     for k, select in enumerate(face_groups, start=1):
         group[select(mesh.triangles)] = k
+    truly_sharp = sharp.copy()
     sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
     patches, face_patch = _patches(geometry, adjacency[~sharp])
     sharp_edges = mesh.face_adjacency_edges[sharp]
-    sharp_convex = mesh.face_adjacency_convex[sharp]
-    corners, curves = _curves(mesh.vertices, sharp_edges, sharp_convex, threshold)
+    corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
+                              truly_sharp[sharp], threshold)
     return Features(corners, curves, patches, face_patch, feature_angle)
 
 
@@ -159,11 +179,13 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
         verts = mesh.vertices[np.unique(mesh.faces[faces])]
         planar = bool(np.abs((verts - centroid) @ normal).max() <= 1e-9 * geometry.scale
                       and np.all(normals[faces] @ normal > 1 - 1e-9))
-        patches.append(Patch(f"patch-{k}", faces, area, normal, centroid, verts, planar))
+        cylinder = None if planar else fit_cylinder(centres[faces], normals[faces], verts)
+        patches.append(Patch(f"patch-{k}", faces, area, normal, centroid, verts, planar, cylinder))
     return patches, labels
 
 
-def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, turn_threshold: float):
+def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, truly_sharp: np.ndarray,
+            turn_threshold: float):
     if len(edges) == 0:
         return [], []
     nv = len(vertices)
@@ -188,12 +210,13 @@ def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, turn_th
     for k in range(count):
         members = np.flatnonzero(edge_curve == k)
         ordered, closed = _order_chain(edges[members], corner_mask)
-        raw.append((int(min(ordered)), ordered, closed, bool(np.mean(convex[members]) >= 0.5)))
+        raw.append((int(min(ordered)), ordered, closed, bool(np.mean(convex[members]) >= 0.5),
+                    bool(np.mean(truly_sharp[members]) >= 0.5)))
     raw.sort(key=lambda item: item[0])
     curves = []
-    for i, (_, ordered, closed, is_convex) in enumerate(raw):
+    for i, (_, ordered, closed, is_convex, is_sharp) in enumerate(raw):
         points = vertices[ordered]
-        curve = Curve(f"curve-{i}", points, closed, ordered, convex=is_convex)
+        curve = Curve(f"curve-{i}", points, closed, ordered, convex=is_convex, sharp=is_sharp)
         if closed:
             curve.circle = fit_circle(points)
         curves.append(curve)
@@ -258,6 +281,70 @@ def fit_circle(points: np.ndarray) -> Circle | None:
     if axis[np.argmax(np.abs(axis))] < 0:
         axis = -axis
     return Circle(centre0 + cx * u + cy * v, axis, radius)
+
+
+def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.ndarray) -> Cylinder | None:
+    """The cylinder a patch lies on (normals perpendicular to one axis, points on one circle), or None."""
+    if len(face_normals) < 3:
+        return None
+    _, singular, vt = np.linalg.svd(face_normals, full_matrices=False)
+    axis = vt[2]
+    if singular[2] > 1e-3 * singular[0]:
+        return None
+    circle = fit_circle_projected(vertices, axis)
+    if circle is None:
+        return None
+    centre, radius = circle
+    radial = face_centres - centre
+    radial -= np.outer(radial @ axis, axis)
+    concave = bool(np.mean(np.einsum("ij,ij->i", radial, face_normals)) < 0)
+    angles = np.sort(np.arctan2(radial @ np.cross(axis, _any_perpendicular(axis)), radial @ _any_perpendicular(axis)))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
+    if axis[np.argmax(np.abs(axis))] < 0:
+        axis = -axis
+    return Cylinder(centre, axis, radius, concave, bool(gaps.max() < np.radians(30)))
+
+
+def _any_perpendicular(axis: np.ndarray) -> np.ndarray:
+    helper = np.eye(3)[np.argmin(np.abs(axis))]
+    v = np.cross(axis, helper)
+    return v / np.linalg.norm(v)
+
+
+def fit_circle_projected(points: np.ndarray, axis: np.ndarray):
+    """Centre (a point on the axis) and radius of the circle the points make seen along ``axis``."""
+    u = _any_perpendicular(axis)
+    v = np.cross(axis, u)
+    origin = points.mean(axis=0)
+    xy = np.column_stack([(points - origin) @ u, (points - origin) @ v])
+    A = np.column_stack([2 * xy, np.ones(len(xy))])
+    (cx, cy, c), *_ = np.linalg.lstsq(A, (xy ** 2).sum(axis=1), rcond=None)
+    radius = float(np.sqrt(max(c + cx ** 2 + cy ** 2, 0.0)))
+    if radius == 0 or np.abs(np.linalg.norm(xy - [cx, cy], axis=1) - radius).max() > CIRCLE_TOLERANCE * radius:
+        return None
+    return origin + cx * u + cy * v, radius
+
+
+def classify(features: Features, kinds) -> Features:
+    """Give every curve and patch the feature kinds (``FeatureKind``s) whose tests it passes."""
+    for kind in kinds.values():
+        group = features.curves if kind.of == "curve" else features.patches
+        for feature in group:
+            if kind.name not in feature.kinds and all(_passes(feature, t, v) for t, v in kind.tests.items()):
+                feature.kinds.append(kind.name)
+    return features
+
+
+def _passes(feature, test: str, value) -> bool:
+    if test == "named":
+        return value in feature.names
+    if test == "circular":
+        return (feature.circle is not None) == value
+    if test in ("cylindrical", "concave", "full_turn"):
+        cylinder = feature.cylinder
+        actual = cylinder is not None if test == "cylindrical" else bool(cylinder and getattr(cylinder, test))
+        return actual == value
+    return bool(getattr(feature, test)) == value
 
 
 def apply_names(features: Features, rules, given_curves=()) -> Features:

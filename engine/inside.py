@@ -25,7 +25,7 @@ def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> 
     tri = vertices[faces]
     edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
     subdiv = np.maximum(1, np.ceil(edge / spacing)).astype(int)
-    chunks = [vertices]
+    chunks = [vertices[np.unique(faces)]]
     for n in np.unique(subdiv[subdiv > 1]):
         bary = _barycentric_grid(int(n))
         chunks.append(np.einsum("bk,fkd->fbd", bary, tri[subdiv == n]).reshape(-1, 3))

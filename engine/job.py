@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .errors import JobError
+from .knowledge import load_placements
 from .meshing import mesher_names
 from .packing import packer_names
 from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, non_negative, positive, validate
@@ -43,7 +44,13 @@ def job_schema() -> dict:
                                    doc="dihedral angle in degrees above which an edge is a feature edge"),
         }),
         "size": Field(NUMBER, check=positive,
-                      doc="global target element size, in model units (default: model size / 40)"),
+                      doc="global element size H, in model units (default: model size / 40)"),
+        "min_size": Field(NUMBER, check=positive, doc="no element size below this"),
+        "max_size": Field(NUMBER, check=positive, doc="no element size above this"),
+        "recipe": Field(STRING, doc="a curated recipe (fuzzymesh recipes list)"),
+        "place": Field(LIST, default=[], doc="pattern placements (see docs/rules.md)"),
+        "knowledge": Field(LIST, default=[], items=Field(STRING),
+                           doc="extra rule/pattern/recipe files or folders, relative to the job file"),
         "packer": Field(STRING, default="lattice", choices=tuple(packer_names()), doc="node placement method"),
         "mesher": Field(STRING, default="delaunay", choices=tuple(mesher_names()), doc="connection method"),
         "seed": Field(INTEGER, default=0, check=non_negative,
@@ -69,6 +76,11 @@ class Job:
     allow_multiple_solids: bool
     feature_angle: float
     size: float | None
+    min_size: float | None
+    max_size: float | None
+    recipe: str | None
+    placements: list
+    knowledge: list[Path]
     packer: str
     mesher: str
     seed: int
@@ -114,13 +126,17 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
     elif geo["parameters"]:
         raise JobError("'parameters' is for built-in shapes only", where=geo_raw.where("parameters"),
                        fix="remove it, or use 'shape:' instead of 'file:'")
+    if values["min_size"] and values["max_size"] and values["min_size"] > values["max_size"]:
+        raise JobError("'min_size' is larger than 'max_size'", where=data.where("min_size"), fix="swap or fix them")
     output = values["output"] or validate(Located(), job_schema()["output"].fields, JobError, "output")
     base_dir = Path(base_dir)
     return Job(
         source=source, base_dir=base_dir, shape=geo["shape"], shape_parameters=parameters,
         geometry_file=(base_dir / geo["file"]) if geo["file"] else None,
         allow_multiple_solids=geo["allow_multiple_solids"], feature_angle=float(geo["feature_angle"]),
-        size=values["size"], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
+        size=values["size"], min_size=values["min_size"], max_size=values["max_size"], recipe=values["recipe"],
+        placements=load_placements(data["place"], data.where("place"), "job", "job/place") if "place" in data else [],
+        knowledge=[base_dir / k for k in values["knowledge"]], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
         output_dir=base_dir / output["directory"], output_name=output["name"],
         output_formats=list(dict.fromkeys(output["formats"])), raw=data)
 

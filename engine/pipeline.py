@@ -7,7 +7,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .features import Features, apply_names, detect_features
+from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
 from .io import write_mesh
 from .errors import JobError, LimitError
@@ -16,7 +16,8 @@ from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
 from .shapes import build_shape
-from .sizing import UniformSize, check_element_limit
+from .knowledge import KnowledgeBase, Placement, load_knowledge
+from .sizing import SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
 
@@ -44,7 +45,7 @@ def stage(name: str, timings: dict):
 
 
 def build_geometry(job: Job):
-    """Geometry, named features and characteristic lengths of the job's solid."""
+    """Geometry and named features (with the shape's characteristic lengths) of the job's solid."""
     if job.shape is not None:
         try:
             shape = build_shape(job.shape, job.shape_parameters)
@@ -52,9 +53,32 @@ def build_geometry(job: Job):
             error.where = error.where or job.where("geometry", "parameters")
             raise JobError(error.what, where=error.where, fix=error.fix) from None
         features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
+        features.lengths = dict(shape.lengths)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
     geometry = load_surface(job.geometry_file, allow_multiple_solids=job.allow_multiple_solids)
     return geometry, detect_features(geometry, job.feature_angle)
+
+
+def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
+    """The recipe's placements, then the job's own; the base pattern alone when neither places any."""
+    placements = []
+    if job.recipe is not None:
+        if job.recipe not in kb.recipes:
+            raise JobError(f"unknown recipe '{job.recipe}'", where=job.where("recipe"),
+                           fix=f"known recipes: {', '.join(sorted(kb.recipes))}")
+        placements += kb.recipes[job.recipe].placements
+    placements += job.placements
+    if not placements:
+        base = kb.sizing["base_pattern"]
+        placements = [Placement(base, "base", None, None, None, None, {}, {}, None, job.where(), "default")]
+    return placements
+
+
+def build_sizing(job: Job, geometry: Geometry, features: Features, kb: KnowledgeBase) -> SizingField:
+    size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
+    classify(features, kb.feature_kinds)
+    placed = bind(kb, job_placements(job, kb), features, geometry, size)
+    return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
 
 
 def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True) -> Result:
@@ -66,13 +90,15 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              job.shape or job.geometry_file, len(geometry.faces), geometry.volume, len(features.corners),
              len(features.curves), len(features.patches), ", ".join(features.names) or "none", timings["geometry"])
     with stage("sizing", timings):
-        size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
-        sizing = UniformSize(size)
+        kb = load_knowledge(job.knowledge)
+        sizing = build_sizing(job, geometry, features, kb)
         try:
             expected = check_element_limit(geometry, sizing, max_elements)
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
-    log.info("sizing: uniform h = %.4g, about %.3g tetrahedra expected (%.2f s)", size, expected, timings["sizing"])
+    log.info("sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected "
+             "(%.2f s)", len(sizing.placed), ", ".join(p.id for p in sizing.placed), sizing.global_size,
+             sizing.h_min, sizing.h_max, expected, timings["sizing"])
     with stage("packing", timings):
         packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])

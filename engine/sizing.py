@@ -1,44 +1,393 @@
-"""Target element size h(x) and the element-count guard.
+"""The sizing field: patterns placed on features, composed by membership dominance.
 
-A sizing field is any object with ``__call__(points (n, 3)) -> h (n,)`` and
-the attributes ``h_min`` and ``h_max``. The knowledge-driven field composed by
-membership dominance comes with the knowledge base; :class:`UniformSize` is
-the base case.
+Every placed pattern k gives a membership mu_k(x) and a size h_k(x) from the
+distance of x to its anchor (per zone: a spacing law h(d) and a trapezoid
+mu(d); a pattern's value at x is its zone with the highest mu). At every point
+the placed pattern with the highest mu wins (ties: the smaller h) and sets the
+raw size: the paper's rule "a node of pattern A is kept where mu_A >= mu_B".
+The gradation limit then caps growth: h(y) <= h(x) + (g - 1) |x - y|, via a
+background grid graded exactly in the L1 metric at rate (g - 1)/sqrt(3) (so
+its trilinear interpolant is Euclidean-Lipschitz with rate g - 1) and
+h = min(raw, graded grid). Every evaluation can return its audit arrays.
 """
 from __future__ import annotations
 
+import logging
 import math
+from dataclasses import dataclass, field
 
+import numba
 import numpy as np
+from scipy import ndimage
 
-from .errors import LimitError
+from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_samples, patch_samples
+from .errors import KnowledgeError, LimitError
+from .fuzzy import Term
+from .knowledge import KnowledgeBase, Placement, Zone, check_placement
 
-# tetrahedra per node of a well-spaced Delaunay mesh, and nodes per h^3 of volume
-TETS_PER_NODE = 5.5
-NODES_PER_H3 = 1.0
+log = logging.getLogger(__name__)
+
+GRID_NODES = 400_000      # background grid for the gradation
+SAMPLES_PER_NEAR = 3      # anchor samples per finest size of the pattern
+TETS_PER_NODE = 5.5       # tetrahedra per node of a well-spaced Delaunay mesh
+NODES_PER_H3 = 1.0        # nodes per h^3 of volume
 
 
-class UniformSize:
-    """h(x) = h everywhere."""
+@dataclass
+class BoundZone:
+    """A zone with its numbers evaluated for one placement."""
 
-    def __init__(self, h: float):
-        self.h = float(h)
-        self.h_min = self.h_max = self.h
+    zone: Zone
+    near: float
+    far: float
+    over: float
+    exponent: float
+    trapezoid: tuple | None
+    height: float
+    role: str | None          # ligament role, or None for the anchor distance
+    gap: float = 0.0
+
+    @property
+    def reach(self) -> float:
+        """Distance beyond which the membership is zero."""
+        return math.inf if self.trapezoid is None else self.trapezoid[3]
+
+    def size(self, d: np.ndarray) -> np.ndarray:
+        if self.zone.law == "constant":
+            return np.full(len(d), self.near)
+        t = np.clip(d / self.over, 0.0, 1.0)
+        if self.zone.law == "linear":
+            return self.near + (self.far - self.near) * t
+        if self.zone.law == "geometric":
+            return self.near * (self.far / self.near) ** t
+        return self.near + (self.far - self.near) * t ** self.exponent
+
+    def membership(self, d: np.ndarray) -> np.ndarray:
+        if self.trapezoid is None:
+            return np.full(len(d), self.height)
+        mu = np.zeros(len(d))
+        finite = np.isfinite(d)
+        mu[finite] = self.height * Term("zone", self.trapezoid).membership(d[finite])
+        return mu
+
+
+@dataclass
+class PlacedPattern:
+    """One pattern bound to one anchor, with evaluated parameters."""
+
+    id: str
+    pattern: str
+    placement: Placement
+    feature: str | None
+    length: float | None       # L
+    parameters: dict
+    zones: list[BoundZone]
+    distance: object
+    roles: dict = field(default_factory=dict)   # role -> SampledDistance
+
+    def evaluate(self, points: np.ndarray):
+        """(mu, h, zone index) at ``points``; mu = 0, h = inf and zone = -1 where no zone reaches."""
+        n = len(points)
+        best_mu, best_h, best_zone = np.zeros(n), np.full(n, np.inf), np.full(n, -1)
+        anchor_reach = max((z.reach + z.gap for z in self.zones), default=0.0)
+        d_anchor = self.distance(points, anchor_reach)
+        for k, zone in enumerate(self.zones):
+            # only points the zone can reach; the ligament d_anchor + d_role - gap is >= d_anchor - gap
+            idx = np.flatnonzero(d_anchor < zone.reach + zone.gap) if np.isfinite(zone.reach) else np.arange(n)
+            d = d_anchor[idx]
+            if zone.role is not None:
+                d = d + self.roles[zone.role](points[idx], zone.reach + zone.gap) - zone.gap
+            mu = zone.membership(d)
+            h = np.where(mu > 0, zone.size(d), np.inf)
+            better = (mu > best_mu[idx]) | ((mu == best_mu[idx]) & (h < best_h[idx]) & (mu > 0))
+            won = idx[better]
+            best_mu[won], best_h[won], best_zone[won] = mu[better], h[better], k
+        return best_mu, best_h, best_zone
+
+    def legend(self) -> dict:
+        return {"id": self.id, "pattern": self.pattern, "placement": self.placement.source,
+                "origin": self.placement.origin, "feature": self.feature, "L": self.length,
+                "parameters": self.parameters,
+                "zones": [{"id": z.zone.id, "source": z.zone.source} for z in self.zones]}
+
+
+@dataclass
+class SizingAudit:
+    """Why each point got its size."""
+
+    h: np.ndarray             # final size
+    raw: np.ndarray           # size of the winning pattern, before gradation and bounds
+    winner: np.ndarray        # index of the winning placed pattern
+    runner_up: np.ndarray     # index of the best other pattern (-1 if none reaches)
+    zone: np.ndarray          # zone index of the winner
+    mu: np.ndarray            # (n, patterns) membership of every placed pattern
+    sizes: np.ndarray         # (n, patterns) size every placed pattern asks for (inf where mu = 0)
+
+    @property
+    def graded(self) -> np.ndarray:
+        return self.h < self.raw * (1 - 1e-12)
+
+
+class SizingField:
+    """h(x) from placed patterns by membership dominance, with the gradation limit and bounds."""
+
+    def __init__(self, placed: list[PlacedPattern], geometry, gradation: float, global_size: float,
+                 min_size: float | None = None, max_size: float | None = None):
+        if not placed:
+            raise KnowledgeError("no pattern is placed", fix="place the base pattern 'uniform-domain'")
+        self.placed = placed
+        self.global_size = global_size
+        self.gradation = gradation
+        self.min_size, self.max_size = min_size, max_size
+        self._build_grid(geometry)
+
+    # -- raw composition
+    def _raw(self, points: np.ndarray):
+        """Raw size, winner, runner-up, winner's zone, and (n, patterns) memberships and sizes."""
+        n, count = len(points), len(self.placed)
+        mu, size, zone = np.empty((count, n)), np.empty((count, n)), np.empty((count, n), dtype=np.int64)
+        for k, placed in enumerate(self.placed):
+            mu[k], size[k], zone[k] = placed.evaluate(points)
+        winner, runner_up = _dominance(mu, size)
+        rows = np.arange(n)
+        safe = np.maximum(winner, 0)
+        raw = np.where(winner >= 0, size[safe, rows], self.global_size)
+        return raw, winner, runner_up, zone[safe, rows], mu.T, size.T
+
+    # -- gradation grid
+    def _build_grid(self, geometry) -> None:
+        lo, hi = geometry.bounds
+        extent = hi - lo
+        cell = float(np.cbrt(np.prod(extent) / GRID_NODES))
+        cell = max(cell, float(extent.max()) / 512)
+        shape = tuple(int(np.ceil(e / cell)) + 3 for e in extent)
+        origin = lo - cell
+        axes = [origin[k] + cell * np.arange(shape[k]) for k in range(3)]
+        nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        values = self._raw(nodes)[0]
+        rate = (self.gradation - 1.0) / math.sqrt(3.0)
+        # anchor samples carry the finest sizes into the grid, even between nodes
+        for placed in self.placed:
+            samples = getattr(placed.distance, "samples", None)
+            if samples is None or not len(samples):
+                continue
+            h = self._raw(samples)[0]
+            base = np.floor((samples - origin) / cell).astype(np.int64)
+            for corner in np.ndindex(2, 2, 2):
+                idx = np.clip(base + corner, 0, np.array(shape) - 1)
+                flat = np.ravel_multi_index(idx.T, shape)
+                cone = h + rate * np.abs(nodes[flat] - samples).sum(axis=1)
+                np.minimum.at(values, flat, cone)
+        grid = values.reshape(shape)
+        step = rate * cell
+        for axis in range(3):
+            grid = _grade_along(grid, axis, step)
+        self.grid, self.origin, self.cell, self.shape = grid, origin, cell, shape
+        finest = [self._raw(p.distance.samples)[0].min() for p in self.placed
+                  if getattr(p.distance, "samples", None) is not None]
+        self.h_min = float(min([grid.min(), *finest]))
+        self.h_max = float(grid.max())
+        if self.min_size is not None:
+            self.h_min = max(self.h_min, self.min_size)
+        if self.max_size is not None:
+            self.h_max = min(self.h_max, self.max_size)
+
+    def _graded(self, points: np.ndarray) -> np.ndarray:
+        """Trilinear interpolation of the graded grid."""
+        coordinates = ((points - self.origin) / self.cell).T
+        return ndimage.map_coordinates(self.grid, coordinates, order=1, mode="nearest")
+
+    # -- public
+    def evaluate(self, points: np.ndarray) -> SizingAudit:
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        raw, winner, runner_up, zone, mu, sizes = self._raw(points)
+        h = np.minimum(raw, self._graded(points))
+        if self.min_size is not None or self.max_size is not None:
+            h = np.clip(h, self.min_size or 0.0, self.max_size or np.inf)
+        return SizingAudit(h, raw, winner, runner_up, zone, mu, sizes)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
-        return np.full(len(points), self.h)
+        return self.evaluate(points).h
+
+    def legend(self) -> list[dict]:
+        return [p.legend() for p in self.placed]
 
 
-def estimate_counts(geometry, sizing, samples: int = 50_000, seed: int = 0) -> tuple[float, float]:
-    """Expected (nodes, tetrahedra): the volume integral of the node density 1/h^3."""
+@numba.njit(parallel=True, cache=True)
+def _dominance(mu, size):
+    """Per point: the pattern with the highest mu (ties: smaller h), and the best other one; -1 if none."""
+    count, n = mu.shape
+    winner = np.full(n, -1, dtype=np.int64)
+    runner_up = np.full(n, -1, dtype=np.int64)
+    for i in numba.prange(n):
+        best = -1
+        for k in range(count):
+            if mu[k, i] > 0 and (best < 0 or mu[k, i] > mu[best, i]
+                                 or (mu[k, i] == mu[best, i] and size[k, i] < size[best, i])):
+                best = k
+        second = -1
+        for k in range(count):
+            if k != best and mu[k, i] > 0 and (second < 0 or mu[k, i] > mu[second, i]):
+                second = k
+        winner[i] = best
+        runner_up[i] = second
+    return winner, runner_up
+
+
+def _grade_along(grid: np.ndarray, axis: int, step: float) -> np.ndarray:
+    """Exact 1-D min-plus convolution with step*|i - j| along ``axis`` (forward and backward)."""
+    g = np.moveaxis(grid, axis, 0)
+    ramp = (step * np.arange(g.shape[0])).reshape(-1, *([1] * (g.ndim - 1)))
+    forward = np.minimum.accumulate(g - ramp, axis=0) + ramp
+    backward = (np.minimum.accumulate((forward + ramp)[::-1], axis=0)[::-1]) - ramp
+    return np.moveaxis(np.minimum(forward, backward), 0, axis)
+
+
+# ------------------------------------------------------------------------------- binding
+
+def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, global_size: float) -> list[PlacedPattern]:
+    """Place each placement's pattern on its anchors; evaluate its parameters."""
+    placed = []
+    for placement in placements:
+        pattern = check_placement(kb, placement)
+        anchors = _anchors(pattern, placement, features, geometry)
+        if not anchors:
+            log.info("note: %s places '%s' on %s, but the solid has none; not placed (%s)", placement.origin,
+                     pattern.name, placement.every or placement.at, placement.source)
+        for feature, make_distance in anchors:
+            placed.append(_bind_one(pattern, placement, feature, make_distance, features, geometry, global_size,
+                                    multiple=len(anchors) > 1))
+    return placed
+
+
+def _anchors(pattern, placement, features, geometry):
+    """[(feature or None, spacing -> distance object)] for the placement."""
+    if pattern.anchor == "domain":
+        return [(None, lambda spacing: DomainDistance())]
+    if pattern.anchor == "region":
+        region = RegionDistance(placement.region, placement.source)
+        return [(None, lambda spacing: region)]
+    if pattern.anchor == "point":
+        if placement.point is not None:
+            point = np.asarray(placement.point, dtype=float)
+            return [(None, lambda spacing: SampledDistance(point))]
+        corners = [c for c in features.corners if placement.at in c.names]
+        if not corners:
+            raise _no_feature(placement, features)
+        return [(c, lambda spacing, c=c: SampledDistance(c.point)) for c in corners]
+    group = features.curves if pattern.anchor == "curve" else features.patches
+    if placement.at is not None:
+        chosen = [f for f in group if placement.at in f.names]
+        if not chosen:
+            raise _no_feature(placement, features)
+    else:
+        chosen = [f for f in group if placement.every in f.kinds]
+    if pattern.anchor == "curve":
+        return [(f, lambda spacing, f=f: SampledDistance(curve_samples(f, spacing))) for f in chosen]
+    return [(f, lambda spacing, f=f: SampledDistance(patch_samples(geometry, f, spacing))) for f in chosen]
+
+
+def _no_feature(placement, features):
+    names = ", ".join(features.names) or "none"
+    return KnowledgeError(f"no feature named '{placement.at}' of the kind the pattern needs", where=placement.source,
+                          fix=f"named features of this solid: {names}")
+
+
+def _length(pattern, placement, feature, features):
+    if placement.scale is not None:
+        return float(placement.scale)
+    if pattern.scale == "none":
+        return None
+    if pattern.scale in ("radius", "fillet_radius") and feature is not None:
+        circle = getattr(feature, "circle", None)
+        cylinder = getattr(feature, "cylinder", None)
+        if circle is not None:
+            return float(circle.radius)
+        if cylinder is not None:
+            return float(cylinder.radius)
+    if pattern.scale in features.lengths:
+        return float(features.lengths[pattern.scale])
+    raise KnowledgeError(f"pattern '{pattern.name}' needs the length '{pattern.scale}' (L) of "
+                         f"{feature.id if feature is not None else 'its anchor'}, which is not known",
+                         where=placement.source, fix="give 'scale: LENGTH' in the placement")
+
+
+def _bind_one(pattern, placement, feature, make_distance, features, geometry, global_size, multiple):
+    L = _length(pattern, placement, feature, features)
+    params = {name: p.default for name, p in pattern.parameters.items()}
+    params.update(placement.parameters)
+    env = {**params, "H": global_size}
+    if L is not None:
+        env["L"] = L
+    where = placement.source
+
+    def number(expr, what, zone):
+        try:
+            value = float(expr(env))
+        except (ZeroDivisionError, OverflowError, ValueError):
+            value = math.nan
+        if not math.isfinite(value):
+            raise KnowledgeError(f"{what} of zone '{zone.id}' of pattern '{pattern.name}' is not a finite number "
+                                 f"({expr.text})", where=where, fix=f"check the parameters (zone at {zone.source})")
+        return value
+
+    # the finest size the zones ask for sets the anchor sampling
+    nears = [number(z.near, "'near'", z) for z in pattern.zones]
+    if min(nears) <= 0:
+        raise KnowledgeError(f"pattern '{pattern.name}' asks for a size <= 0", where=where,
+                             fix="make the size parameters positive")
+    distance = make_distance(min(nears) / SAMPLES_PER_NEAR)
+    roles = {}
+    for role, (default, _) in pattern.roles.items():
+        name = placement.roles.get(role, default)
+        targets = [f for f in features.patches + features.curves if name in f.names]
+        if targets:
+            samples = np.concatenate([
+                patch_samples(geometry, f, min(nears) / SAMPLES_PER_NEAR) if hasattr(f, "faces")
+                else curve_samples(f, min(nears) / SAMPLES_PER_NEAR) for f in targets])
+            roles[role] = SampledDistance(samples)
+            anchor_samples = getattr(distance, "samples", None)
+            env[f"gap_{role}"] = roles[role].gap_to(distance) if anchor_samples is not None else 0.0
+        else:
+            env[f"gap_{role}"] = math.inf
+            log.info("note: %s: role '%s' of pattern '%s' names '%s', which this solid does not have; "
+                     "the zones that use it are off", where, role, pattern.name, name)
+    zones = []
+    for zone, near in zip(pattern.zones, nears):
+        role = zone.distance.split(":", 1)[1] if zone.distance.startswith("ligament:") else None
+        if role is not None and role not in roles:
+            continue
+        if zone.active_if is not None and not number(zone.active_if, "'active_if'", zone) > 0:
+            continue
+        far = number(zone.far, "'far'", zone) if zone.far else near
+        over = number(zone.over, "'over'", zone) if zone.over else 1.0
+        exponent = number(zone.exponent, "'exponent'", zone) if zone.exponent else 1.0
+        height = number(zone.height, "membership height", zone)
+        trapezoid = None
+        if zone.trapezoid is not None:
+            trapezoid = tuple(number(e, "trapezoid point", zone) for e in zone.trapezoid)
+            if not all(trapezoid[i] <= trapezoid[i + 1] for i in range(3)):
+                raise KnowledgeError(f"zone '{zone.id}' of pattern '{pattern.name}' evaluates to a trapezoid "
+                                     f"{trapezoid} that is not ordered", where=where, fix="check the parameters")
+        if far <= 0 or over <= 0 or not 0 <= height <= 1:
+            raise KnowledgeError(f"zone '{zone.id}' of pattern '{pattern.name}' needs far > 0, over > 0 and a "
+                                 f"membership height in [0, 1]", where=where, fix="check the parameters")
+        gap = env.get(f"gap_{role}", 0.0) if role else 0.0
+        zones.append(BoundZone(zone, near, far, over, exponent, trapezoid, height, role, gap))
+    suffix = f"@{feature.id}" if feature is not None and (multiple or placement.every) else ""
+    return PlacedPattern(placement.id + suffix, pattern.name, placement, getattr(feature, "id", None), L, params,
+                         zones, distance, roles)
+
+
+# ------------------------------------------------------------------------- count estimate
+
+def estimate_counts(geometry, sizing, samples: int = 200_000, seed: int = 0) -> tuple[float, float]:
+    """Expected (nodes, tetrahedra): the volume integral of the node density 1/h^3 (Monte Carlo)."""
     rng = np.random.default_rng(seed)
     lo, hi = geometry.bounds
     points = rng.uniform(lo, hi, size=(samples, 3))
     inside = geometry.contains(points)
-    if not inside.any():
-        density = 1.0 / sizing.h_min ** 3
-    else:
-        density = float(np.mean(1.0 / sizing(points[inside]) ** 3))
+    density = float(np.mean(1.0 / sizing(points[inside]) ** 3)) if inside.any() else 1.0 / sizing.h_min ** 3
     nodes = NODES_PER_H3 * geometry.volume * density
     return nodes, nodes * TETS_PER_NODE
 
@@ -50,5 +399,5 @@ def check_element_limit(geometry, sizing, max_elements: float) -> float:
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {max_elements:.3g}); "
             f"the smallest size is {sizing.h_min:.4g}",
-            fix="use a larger size, or raise the limit with --max-elements")
+            fix="use larger sizes, or raise the limit with --max-elements")
     return tets

@@ -1,0 +1,121 @@
+"""Distances from points to what a pattern is placed on: features, points, regions, the domain.
+
+Curves and patches are sampled densely (spacing a fraction of the finest size
+the pattern asks for) and queried with a k-d tree, with an upper bound so
+points beyond a pattern's reach cost little.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .errors import KnowledgeError
+from .inside import surface_samples
+from .schema import LIST, NUMBER, Field, check_value, positive
+
+WORKERS = -1   # k-d tree queries use every core
+
+
+class SampledDistance:
+    """Distance to a dense point sample of a curve, patch or point."""
+
+    def __init__(self, samples: np.ndarray):
+        self.samples = np.asarray(samples, dtype=float).reshape(-1, 3)
+        self.tree = cKDTree(self.samples)
+        self.lo, self.hi = self.samples.min(axis=0), self.samples.max(axis=0)
+
+    def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
+        """Distances; ``inf`` where farther than ``bound``."""
+        distance = np.full(len(points), np.inf)
+        near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1) if np.isfinite(bound) \
+            else np.ones(len(points), bool)
+        if near.any():
+            distance[near], _ = self.tree.query(points[near], distance_upper_bound=bound, workers=WORKERS)
+        return distance
+
+    def gap_to(self, other: "SampledDistance") -> float:
+        return float(other(self.samples).min())
+
+
+def curve_samples(curve, spacing: float) -> np.ndarray:
+    count = int(min(2_000_000, max(2, np.ceil(curve.length / spacing) + 1)))
+    return curve.point_at(np.linspace(0.0, curve.length, count))
+
+
+MAX_PATCH_SAMPLES = 2_000_000
+
+
+def patch_samples(geometry, patch, spacing: float) -> np.ndarray:
+    """Points on the patch, no farther than ``spacing`` from any of its points (at most ~2M)."""
+    vertices, faces = geometry.mesh.vertices, geometry.mesh.faces[patch.faces]
+    spacing = max(spacing, float(np.sqrt(2.0 * patch.area / MAX_PATCH_SAMPLES)))
+    return surface_samples(vertices, faces, spacing)
+
+
+class RegionDistance:
+    """Distance outside a box, sphere or cylinder (0 inside)."""
+
+    def __init__(self, spec: dict, where: str):
+        if not isinstance(spec, dict) or len(spec) != 1:
+            raise KnowledgeError("a region is one of {box: ...}, {sphere: ...}, {cylinder: ...}", where=where)
+        (self.kind, body), = spec.items()
+        vec = Field(LIST, required=True, items=Field(NUMBER))
+        fields = {"box": {"min": vec, "max": vec},
+                  "sphere": {"centre": vec, "radius": Field(NUMBER, required=True, check=positive)},
+                  "cylinder": {"start": vec, "end": vec, "radius": Field(NUMBER, required=True, check=positive)}}
+        if self.kind not in fields:
+            raise KnowledgeError(f"unknown region '{self.kind}'", where=where, fix="use box, sphere or cylinder")
+        values = check_value(body, Field("mapping", fields=fields[self.kind]), f"region.{self.kind}", where,
+                             KnowledgeError)
+        for key, value in values.items():
+            if isinstance(value, list) and len(value) != 3:
+                raise KnowledgeError(f"region.{self.kind}.{key} needs three coordinates", where=where)
+        self.values = {k: np.asarray(v, dtype=float) for k, v in values.items()}
+        if self.kind == "box" and np.any(self.values["max"] < self.values["min"]):
+            raise KnowledgeError("region box needs min <= max on every axis", where=where)
+        if self.kind == "cylinder" and np.allclose(self.values["start"], self.values["end"]):
+            raise KnowledgeError("region cylinder needs start != end", where=where)
+        v = self.values
+        if self.kind == "box":
+            self.lo, self.hi = v["min"], v["max"]
+        elif self.kind == "sphere":
+            self.lo, self.hi = v["centre"] - v["radius"], v["centre"] + v["radius"]
+        else:
+            ends = np.array([v["start"], v["end"]])
+            self.lo, self.hi = ends.min(axis=0) - v["radius"], ends.max(axis=0) + v["radius"]
+
+    def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
+        """Distances; ``inf`` where farther than ``bound``."""
+        distance = np.full(len(points), np.inf)
+        near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1)
+        distance[near] = self._distance(points[near])
+        distance[distance > bound] = np.inf
+        return distance
+
+    def _distance(self, points: np.ndarray) -> np.ndarray:
+        v = self.values
+        if self.kind == "box":
+            outside = np.maximum(np.maximum(v["min"] - points, points - v["max"]), 0.0)
+            return np.linalg.norm(outside, axis=1)
+        if self.kind == "sphere":
+            return np.maximum(np.linalg.norm(points - v["centre"], axis=1) - v["radius"], 0.0)
+        axis = v["end"] - v["start"]
+        length = np.linalg.norm(axis)
+        axis = axis / length
+        t = (points - v["start"]) @ axis
+        radial = np.linalg.norm(points - v["start"] - np.outer(t, axis), axis=1)
+        along = np.maximum(np.maximum(-t, t - length), 0.0)
+        return np.hypot(np.maximum(radial - v["radius"], 0.0), along)
+
+    def size(self) -> float:
+        v = self.values
+        if self.kind == "box":
+            return float(np.linalg.norm(v["max"] - v["min"]))
+        return float(2 * v["radius"])
+
+
+class DomainDistance:
+    """Distance 0 everywhere: for patterns over the whole solid."""
+
+    def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
+        return np.zeros(len(points))
