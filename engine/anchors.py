@@ -1,12 +1,16 @@
 """Distances from points to what a pattern is placed on: features, points, regions, the domain.
 
-Curves and patches are sampled densely (spacing a fraction of the finest size
-the pattern asks for) and queried with a k-d tree, with an upper bound so
-points beyond a pattern's reach cost little.
+Curves (segments) and patches (triangles) are measured exactly with libigl's
+AABB tree; a k-d tree over sample points would degenerate near the axis of a
+circle or cylinder, where thousands of samples are equally far. Points beyond
+a pattern's reach (outside the anchor's box grown by the bound) are skipped.
+Each anchor also keeps dense samples (spacing a fraction of the finest size
+its pattern asks for), which seed the gradation grid and measure gaps.
 """
 from __future__ import annotations
 
 import numpy as np
+import igl
 from scipy.spatial import cKDTree
 
 from .errors import KnowledgeError
@@ -35,6 +39,44 @@ class SampledDistance:
 
     def gap_to(self, other: "SampledDistance") -> float:
         return float(other(self.samples).min())
+
+
+class FeatureDistance:
+    """Exact distance to segments (a curve) or triangles (a patch), plus samples of the feature."""
+
+    def __init__(self, vertices: np.ndarray, simplices: np.ndarray, samples: np.ndarray):
+        used = np.unique(simplices)
+        remap = np.zeros(len(vertices), dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        self.vertices = np.ascontiguousarray(vertices[used], dtype=np.float64)
+        self.simplices = np.ascontiguousarray(remap[simplices], dtype=np.int64)
+        self.samples = np.asarray(samples, dtype=float).reshape(-1, 3)
+        self.lo, self.hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
+        """Distances; ``inf`` where farther than ``bound``."""
+        distance = np.full(len(points), np.inf)
+        near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1)
+        if near.any():
+            squared, _, _ = igl.point_mesh_squared_distance(
+                np.ascontiguousarray(points[near], dtype=np.float64), self.vertices, self.simplices)
+            distance[near] = np.sqrt(squared)
+        distance[distance > bound] = np.inf
+        return distance
+
+    def gap_to(self, other) -> float:
+        return float(other(self.samples).min())
+
+
+def curve_distance(curve, spacing: float) -> FeatureDistance:
+    line = curve.polyline
+    segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))])
+    return FeatureDistance(line, segments, curve_samples(curve, spacing))
+
+
+def patch_distance(geometry, patch, spacing: float) -> FeatureDistance:
+    return FeatureDistance(geometry.mesh.vertices, geometry.mesh.faces[patch.faces],
+                           patch_samples(geometry, patch, spacing))
 
 
 def curve_samples(curve, spacing: float) -> np.ndarray:

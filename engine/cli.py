@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -95,13 +96,15 @@ def _cmd_lint(args) -> int:
 def _cmd_explain(args) -> int:
     from .job import load_job
     from .knowledge import load_knowledge
-    from .pipeline import build_geometry, build_sizing
+    from .pipeline import build_geometry, build_sizing, check_job_knowledge
     from .explain import explain_point
 
     logging.getLogger().setLevel(logging.WARNING)
     job = load_job(args.job)
+    kb = load_knowledge(job.knowledge)
+    check_job_knowledge(job, kb)
     geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, load_knowledge(job.knowledge))
+    sizing = build_sizing(job, geometry, features, kb)
     inside = bool(geometry.contains([args.at])[0])
     print(explain_point(sizing, args.at, inside))
     return 0
@@ -184,7 +187,10 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except FuzzymeshError as error:
         print(f"fuzzymesh: error: {error.one_line()}", file=sys.stderr)
-        return error.exit_code
+        return 2
+    except BrokenPipeError:   # output piped into e.g. head, which closed early
+        sys.stdout = open(os.devnull, "w")
+        return 0
     except KeyboardInterrupt:
         print("fuzzymesh: interrupted", file=sys.stderr)
         return 130

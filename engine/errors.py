@@ -2,15 +2,13 @@
 
 Every error caused by the user's input is a :class:`FuzzymeshError`. Its text
 is complete on its own: where (file, line, column), what is wrong, and what to
-do about it. The CLI prints it as one line and exits with ``exit_code``.
+do about it. The CLI prints it as one line and exits with code 2.
 """
 from __future__ import annotations
 
 
 class FuzzymeshError(Exception):
     """A problem with the user's input, reported as one line."""
-
-    exit_code = 2
 
     def __init__(self, what: str, *, where: str | None = None, fix: str | None = None):
         self.what = what
@@ -35,8 +33,6 @@ class JobError(FuzzymeshError):
 
 class KnowledgeError(FuzzymeshError):
     """A rule, pattern or recipe file is invalid."""
-
-    exit_code = 1
 
 
 class LimitError(FuzzymeshError):

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import FuzzymeshError, KnowledgeError
+from .anchors import RegionDistance
 from .expr import Expression, ExpressionError
 from .fuzzy import Rule, RuleBase, Term, Variable
 from .schema import INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, positive, validate
@@ -75,29 +76,29 @@ RULES_FILE = {
 }
 
 
-def _variable(name, raw: Located, is_output: bool, rb_id: str) -> Variable:
-    spec = validate(raw, VARIABLE, KnowledgeError, f"{rb_id}.{name}")
+def _variable(name, raw: Located, is_output: bool, rb_id: str, where: str) -> Variable:
+    spec = validate(raw, VARIABLE, KnowledgeError, f"{rb_id}.{name}", where)
     universe = spec["universe"]
-    if len(universe) != 2 or not universe[0] < universe[1]:
-        raise _err(f"universe of '{name}' must be [low, high] with low < high", raw.where("universe"))
+    if len(universe) != 2 or not np.all(np.isfinite(universe)) or not universe[0] < universe[1]:
+        raise _err(f"universe of '{name}' must be [low, high], finite, with low < high", raw.where("universe"))
     lo, hi = universe
     terms = {}
     for label, points in raw["terms"].items():
-        where = raw["terms"].where(label)
+        term_where = raw["terms"].where(label)
         if not isinstance(points, list) or len(points) not in (3, 4) or \
                 not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in points):
-            raise _err(f"term '{label}' of '{name}' must be 3 or 4 numbers", where,
+            raise _err(f"term '{label}' of '{name}' must be 3 or 4 numbers", term_where,
                        "give [a, b, c, d] (trapezoid) or [a, b, c] (triangle)")
         if len(points) == 3:
             points = [points[0], points[1], points[1], points[2]]
         if not all(points[i] <= points[i + 1] for i in range(3)):
-            raise _err(f"term '{label}' of '{name}' needs a <= b <= c <= d, got {points}", where)
+            raise _err(f"term '{label}' of '{name}' needs a <= b <= c <= d, got {points}", term_where)
         if points[0] < lo or points[3] > hi:
-            raise _err(f"term '{label}' of '{name}' reaches outside the universe [{lo}, {hi}]", where,
+            raise _err(f"term '{label}' of '{name}' reaches outside the universe [{lo}, {hi}]", term_where,
                        "keep the term's points inside the universe (inputs are clipped to it)")
         terms[str(label)] = Term(str(label), tuple(float(p) for p in points))
     if is_output and spec["default"] is None:
-        raise _err(f"output '{name}' has no default", raw.where(), "add 'default:' (the value when no rule fires)")
+        raise _err(f"output '{name}' has no default", where, "add 'default:' (the value when no rule fires)")
     if not is_output and spec["default"] is not None:
         raise _err(f"input '{name}' cannot have a default", raw.where("default"), "remove it; inputs are measured")
     if is_output and not lo <= spec["default"] <= hi:
@@ -108,8 +109,10 @@ def _variable(name, raw: Located, is_output: bool, rb_id: str) -> Variable:
 def _rulebase(name, raw: Located, file_id: str) -> RuleBase:
     rb_id = f"{file_id}.{name}"
     spec = validate(raw, RULEBASE, KnowledgeError, rb_id)
-    inputs = {str(k): _variable(k, v, False, rb_id) for k, v in raw["inputs"].items() if _is_map(v, raw["inputs"], k)}
-    outputs = {str(k): _variable(k, v, True, rb_id) for k, v in raw["outputs"].items() if _is_map(v, raw["outputs"], k)}
+    inputs = {str(k): _variable(k, v, False, rb_id, raw["inputs"].where(k))
+              for k, v in raw["inputs"].items() if _is_map(v, raw["inputs"], k)}
+    outputs = {str(k): _variable(k, v, True, rb_id, raw["outputs"].where(k))
+               for k, v in raw["outputs"].items() if _is_map(v, raw["outputs"], k)}
     if not inputs or not outputs:
         raise _err(f"rule base '{rb_id}' needs at least one input and one output", raw.where())
     rules, seen = [], {}
@@ -130,6 +133,10 @@ def _rulebase(name, raw: Located, file_id: str) -> RuleBase:
         action = validate(raw["action"], {"output": Field(STRING, required=True, choices=tuple(outputs)),
                                           "threshold": Field(NUMBER, required=True),
                                           "doc": Field(STRING, default="")}, KnowledgeError, f"{rb_id}.action")
+        lo, hi = outputs[action["output"]].universe
+        if not lo <= action["threshold"] <= hi:
+            raise _err(f"action threshold {action['threshold']} lies outside the universe of '{action['output']}'",
+                       raw["action"].where("threshold"), f"give a value in [{lo}, {hi}]")
         extra["action"] = action
     base = RuleBase(rb_id, inputs, outputs, rules, spec["resolution"], raw.where(), extra)
     _check_coverage(base, raw.where("rules"))
@@ -147,6 +154,9 @@ def _clauses(raw: Located, variables: dict, role: str, where: str):
         raise _err(f"a rule needs at least one {role} clause", where)
     clauses = []
     for var, label in raw.items():
+        if not isinstance(label, str):
+            raise _err(f"the label of '{var}' must be a name, got {type(label).__name__}", raw.where(var),
+                       "write e.g. 'overlap: LARGE'")
         if var not in variables:
             raise _err(f"unknown {role} '{var}'", raw.where(var), f"known {role}s: {', '.join(variables)}")
         if label not in variables[var].terms:
@@ -272,13 +282,13 @@ def load_pattern(raw: Located, source: str) -> Pattern:
         if not str(name).isidentifier() or name in ("H", "L"):
             raise _err(f"parameter name '{name}' is not allowed", raw["parameters"].where(name),
                        "use a letter-and-underscore name other than H and L")
-        p = validate(body, PARAMETER, KnowledgeError, f"parameters.{name}")
+        p = validate(body, PARAMETER, KnowledgeError, f"parameters.{name}", raw["parameters"].where(name))
         params[str(name)] = Parameter(p["default"], p["doc"], raw["parameters"].where(name))
     roles = {}
     for name, body in raw["roles"].items() if "roles" in raw else []:
         if not str(name).isidentifier():
             raise _err(f"role name '{name}' is not an identifier", raw["roles"].where(name))
-        r = validate(body, ROLE, KnowledgeError, f"roles.{name}")
+        r = validate(body, ROLE, KnowledgeError, f"roles.{name}", raw["roles"].where(name))
         roles[str(name)] = (r["default"], r["doc"])
     pattern = Pattern(spec["name"], spec["doc"], spec["anchor"], spec["accepts"], spec["scale"], params, roles,
                       [], source)
@@ -360,6 +370,10 @@ class Placement:
     scale: float | None
     source: str
     origin: str              # "recipe NAME" or "job"
+    key_where: dict = field(default_factory=dict)   # key -> file:line:col
+
+    def where(self, key: str | None = None) -> str:
+        return self.key_where.get(key, self.source)
 
 
 def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Placement]:
@@ -379,9 +393,15 @@ def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Plac
         for name, value in p["parameters"].items():
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
                 raise _err(f"parameter '{name}' must be a finite number", body["parameters"].where(name))
+        if p["region"] is not None:
+            RegionDistance(p["region"], body.where("region"))
+        key_where = {key: body.where(key) for key in body}
+        for section in ("parameters", "roles"):
+            if section in body:
+                key_where.update({f"{section}.{k}": body[section].where(k) for k in body[section]})
         placements.append(Placement(p["pattern"], p["id"] or f"{prefix}[{index}]", p["at"], p["every"], p["point"],
                                     p["region"], dict(p["roles"]), dict(p["parameters"]), p["scale"],
-                                    body.where(), origin))
+                                    body.where(), origin, key_where))
     return placements
 
 
@@ -431,7 +451,7 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
                           "kinds": Field(MAPPING, required=True, open_keys=True)}, KnowledgeError)
     kinds = {}
     for name, body in raw["kinds"].items():
-        k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}")
+        k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}", raw["kinds"].where(name))
         allowed = FEATURE_TESTS[k["of"]]
         for test, value in body["when"].items():
             if test not in allowed:
@@ -463,7 +483,8 @@ class KnowledgeBase:
     patterns: dict[str, Pattern] = field(default_factory=dict)
     recipes: dict[str, Recipe] = field(default_factory=dict)
     feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
-    sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain"})
+    sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain",
+                                                  "where": "built-in defaults"})
     sources: dict[str, str] = field(default_factory=dict)   # item id -> file:line
 
     def add_file(self, path: Path) -> None:
@@ -489,6 +510,7 @@ class KnowledgeBase:
                 self._unique(self.feature_kinds, name, fk, fk.source)
         else:
             self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
+            self.sizing["where"] = raw.where("base_pattern")
 
     def _unique(self, table: dict, key: str, value, where: str) -> None:
         if key in table:
@@ -503,22 +525,22 @@ class KnowledgeBase:
                 check_placement(self, placement)
         if self.sizing["base_pattern"] not in self.patterns and self.patterns:
             raise _err(f"base pattern '{self.sizing['base_pattern']}' is not in the pattern library",
-                       "sizing", "name an existing pattern")
+                       self.sizing["where"], f"name one of: {', '.join(sorted(self.patterns))}")
 
 
 def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
     """The placement's pattern, after checking its parameters, roles and anchor keys."""
     pattern = kb.patterns.get(placement.pattern)
     if pattern is None:
-        raise _err(f"unknown pattern '{placement.pattern}'", placement.source,
+        raise _err(f"unknown pattern '{placement.pattern}'", placement.where("pattern"),
                    f"known patterns: {', '.join(sorted(kb.patterns))}")
     for name in placement.parameters:
         if name not in pattern.parameters:
-            raise _err(f"pattern '{pattern.name}' has no parameter '{name}'", placement.source,
+            raise _err(f"pattern '{pattern.name}' has no parameter '{name}'", placement.where(f"parameters.{name}"),
                        f"its parameters: {', '.join(pattern.parameters) or 'none'}")
     for name in placement.roles:
         if name not in pattern.roles:
-            raise _err(f"pattern '{pattern.name}' has no role '{name}'", placement.source,
+            raise _err(f"pattern '{pattern.name}' has no role '{name}'", placement.where(f"roles.{name}"),
                        f"its roles: {', '.join(pattern.roles) or 'none'}")
     missing = [n for n, p in pattern.parameters.items() if p.default is None and n not in placement.parameters]
     if missing:
@@ -528,13 +550,18 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
                   "region": ("region",), "domain": ()}[pattern.anchor]
     given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
     if pattern.anchor == "domain" and given:
-        raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'", placement.source)
+        raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'",
+                   placement.where(given[0]), f"remove '{given[0]}:'")
     if pattern.anchor != "domain" and (not given or given[0] not in anchor_key):
         raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) needs one of: {', '.join(anchor_key)}",
-                   placement.source)
-    if placement.every is not None and kb.feature_kinds and placement.every not in kb.feature_kinds:
-        raise _err(f"unknown feature kind '{placement.every}'", placement.source,
-                   f"known kinds: {', '.join(sorted(kb.feature_kinds))}")
+                   placement.where(given[0]) if given else placement.source)
+    if placement.every is not None:
+        if kb.feature_kinds and placement.every not in kb.feature_kinds:
+            raise _err(f"unknown feature kind '{placement.every}'", placement.where("every"),
+                       f"known kinds: {', '.join(sorted(kb.feature_kinds))}")
+        if placement.every not in pattern.accepts:
+            raise _err(f"pattern '{pattern.name}' is not placed on '{placement.every}' features",
+                       placement.where("every"), f"it accepts: {', '.join(pattern.accepts) or 'none (use at:)'}")
     return pattern
 
 
@@ -578,6 +605,8 @@ def lint(paths) -> list[str]:
             kb.add_file(path)
         except FuzzymeshError as exc:
             errors.append(exc.one_line())
+        except Exception as exc:  # a loader fault must not hide the other files' findings
+            errors.append(f"{path}: internal error while reading ({exc.__class__.__name__}: {exc}); please report it")
     if not errors:
         # cross-check recipes against the default patterns plus the linted ones
         base = KnowledgeBase()

@@ -16,7 +16,7 @@ from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
 from .shapes import build_shape
-from .knowledge import KnowledgeBase, Placement, load_knowledge
+from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .sizing import SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
@@ -74,23 +74,36 @@ def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
     return placements
 
 
+def check_job_knowledge(job: Job, kb: KnowledgeBase) -> list[Placement]:
+    """The job's placements, checked against the knowledge base before any geometry work."""
+    placements = job_placements(job, kb)
+    for placement in placements:
+        check_placement(kb, placement)
+    return placements
+
+
 def build_sizing(job: Job, geometry: Geometry, features: Features, kb: KnowledgeBase) -> SizingField:
     size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
     classify(features, kb.feature_kinds)
     placed = bind(kb, job_placements(job, kb), features, geometry, size)
+    if not placed:
+        raise JobError("no pattern could be placed on this solid: the placements match none of its features",
+                       where=job.where("recipe") if job.recipe else job.where("place"),
+                       fix="add the base pattern 'uniform-domain' or place patterns with 'at:' on named features")
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
 
 
 def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True) -> Result:
     """Mesh the job's solid; write the outputs when ``write``. Errors are FuzzymeshErrors."""
     timings: dict = {}
+    kb = load_knowledge(job.knowledge)
+    check_job_knowledge(job, kb)
     with stage("geometry", timings):
         geometry, features = build_geometry(job)
     log.info("geometry: %s, %d faces, volume %.6g, %d corners, %d curves, %d patches, named: %s (%.2f s)",
              job.shape or job.geometry_file, len(geometry.faces), geometry.volume, len(features.corners),
              len(features.curves), len(features.patches), ", ".join(features.names) or "none", timings["geometry"])
     with stage("sizing", timings):
-        kb = load_knowledge(job.knowledge)
         sizing = build_sizing(job, geometry, features, kb)
         try:
             expected = check_element_limit(geometry, sizing, max_elements)

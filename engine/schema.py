@@ -104,15 +104,16 @@ def in_range(lo: float, hi: float) -> Callable[[Any], str | None]:
     return check
 
 
-def validate(mapping, schema: dict, error=FuzzymeshError, context: str = "") -> dict:
+def validate(mapping, schema: dict, error=FuzzymeshError, context: str = "", where: str | None = None) -> dict:
     """Check ``mapping`` against ``schema``; return a plain dict with defaults.
 
-    ``context`` names the section in messages, e.g. ``geometry``.
+    ``context`` names the section in messages, e.g. ``geometry``; ``where`` is
+    the position of the mapping's key, for when the value is not a mapping.
     """
     mapping = located(mapping)
     label = f"in '{context}'" if context else "at the top level"
     if not isinstance(mapping, Located):
-        raise error(f"expected a mapping {label}, got {_describe(mapping)}")
+        raise error(f"expected a mapping {label}, got {_describe(mapping)}", where=where)
     allowed = ", ".join(schema)
     for key in mapping:
         if key not in schema:
@@ -151,7 +152,7 @@ def check_value(value, spec: Field, name: str, where: str, error=FuzzymeshError)
                     fix=f"choose one of: {', '.join(map(str, spec.choices))}")
     if isinstance(value, dict):
         if spec.fields is not None:
-            value = validate(value, spec.fields, error, name)
+            value = validate(value, spec.fields, error, name, where)
         elif not spec.open_keys:
             value = dict(value)
     elif isinstance(value, list) and spec.items is not None:

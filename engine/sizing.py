@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_samples, patch_samples
+from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_distance, patch_distance
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
 from .knowledge import KnowledgeBase, Placement, Zone, check_placement
@@ -83,7 +83,7 @@ class PlacedPattern:
     parameters: dict
     zones: list[BoundZone]
     distance: object
-    roles: dict = field(default_factory=dict)   # role -> SampledDistance
+    roles: dict = field(default_factory=dict)   # role -> distance to the role feature(s)
 
     def evaluate(self, points: np.ndarray):
         """(mu, h, zone index) at ``points``; mu = 0, h = inf and zone = -1 where no zone reaches."""
@@ -95,14 +95,52 @@ class PlacedPattern:
             # only points the zone can reach; the ligament d_anchor + d_role - gap is >= d_anchor - gap
             idx = np.flatnonzero(d_anchor < zone.reach + zone.gap) if np.isfinite(zone.reach) else np.arange(n)
             d = d_anchor[idx]
-            if zone.role is not None:
-                d = d + self.roles[zone.role](points[idx], zone.reach + zone.gap) - zone.gap
+            if zone.role is not None:   # >= 0 exactly; clamp the sampling error of the gap
+                d = np.maximum(d + self.roles[zone.role](points[idx], zone.reach + zone.gap) - zone.gap, 0.0)
             mu = zone.membership(d)
             h = np.where(mu > 0, zone.size(d), np.inf)
             better = (mu > best_mu[idx]) | ((mu == best_mu[idx]) & (h < best_h[idx]) & (mu > 0))
             won = idx[better]
             best_mu[won], best_h[won], best_zone[won] = mu[better], h[better], k
         return best_mu, best_h, best_zone
+
+    def bounds(self, centres: np.ndarray, radius: float):
+        """Lower and upper bound of mu, and lower bound of h, over balls of ``radius`` around ``centres``.
+
+        Distances are 1-Lipschitz (ligament distances 2-Lipschitz), trapezoids
+        take their extremes at interval ends or on their plateau, and the size
+        laws are monotone in the distance.
+        """
+        n = len(centres)
+        mu_low, mu_high, h_low = np.zeros(n), np.zeros(n), np.full(n, np.inf)
+        anchor_reach = max((z.reach + z.gap for z in self.zones), default=0.0) + 2 * radius
+        d_anchor = self.distance(centres, anchor_reach)
+        for zone in self.zones:
+            if zone.role is None:
+                d, spread = d_anchor, radius
+            else:
+                d = np.maximum(d_anchor + self.roles[zone.role](centres, zone.reach + zone.gap + 2 * radius)
+                               - zone.gap, 0.0)
+                spread = 2 * radius
+            lo, hi = np.maximum(d - spread, 0.0), d + spread
+            ends_lo, ends_hi = _membership_at(zone, lo), _membership_at(zone, hi)
+            low = np.minimum(ends_lo, ends_hi)
+            high = np.maximum(ends_lo, ends_hi)
+            if zone.trapezoid is None:
+                plateau = np.ones(n, bool)
+            else:
+                plateau = (lo <= zone.trapezoid[2]) & (hi >= zone.trapezoid[1])
+            high = np.where(plateau, zone.height, high)
+            reached = high > 0
+            size_low = np.full(n, np.inf)
+            finite = reached & np.isfinite(lo)
+            size_low[finite] = np.minimum(zone.size(np.minimum(lo[finite], 1e300)),
+                                          zone.size(np.minimum(hi[finite], 1e300)))
+            size_low[reached & ~np.isfinite(lo)] = min(zone.near, zone.far)
+            mu_low = np.maximum(mu_low, low)
+            mu_high = np.maximum(mu_high, high)
+            h_low = np.minimum(h_low, size_low)
+        return mu_low, mu_high, h_low
 
     def legend(self) -> dict:
         return {"id": self.id, "pattern": self.pattern, "placement": self.placement.source,
@@ -156,37 +194,46 @@ class SizingField:
 
     # -- gradation grid
     def _build_grid(self, geometry) -> None:
+        """Graded background grid G with G <= raw everywhere, so h = G is exactly Lipschitz.
+
+        Each cell gets a lower bound of the raw size over the whole cell (interval
+        bounds of every pattern's mu and h over the cell, keeping only patterns
+        that can win somewhere in it); each node the minimum over its 8 cells;
+        then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
+        Trilinear interpolation of such a grid is Euclidean-Lipschitz with g - 1
+        and never exceeds the raw size.
+        """
         lo, hi = geometry.bounds
         extent = hi - lo
         cell = float(np.cbrt(np.prod(extent) / GRID_NODES))
         cell = max(cell, float(extent.max()) / 512)
         shape = tuple(int(np.ceil(e / cell)) + 3 for e in extent)
         origin = lo - cell
-        axes = [origin[k] + cell * np.arange(shape[k]) for k in range(3)]
-        nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-        values = self._raw(nodes)[0]
-        rate = (self.gradation - 1.0) / math.sqrt(3.0)
-        # anchor samples carry the finest sizes into the grid, even between nodes
+        axes = [origin[k] + cell * (np.arange(shape[k] - 1) + 0.5) for k in range(3)]
+        centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        half_diagonal = 0.5 * math.sqrt(3.0) * cell
+        lows, mu_low, mu_high = [], [], []
         for placed in self.placed:
-            samples = getattr(placed.distance, "samples", None)
-            if samples is None or not len(samples):
-                continue
-            h = self._raw(samples)[0]
-            base = np.floor((samples - origin) / cell).astype(np.int64)
-            for corner in np.ndindex(2, 2, 2):
-                idx = np.clip(base + corner, 0, np.array(shape) - 1)
-                flat = np.ravel_multi_index(idx.T, shape)
-                cone = h + rate * np.abs(nodes[flat] - samples).sum(axis=1)
-                np.minimum.at(values, flat, cone)
-        grid = values.reshape(shape)
-        step = rate * cell
+            m_lo, m_hi, h_lo = placed.bounds(centres, half_diagonal)
+            lows.append(h_lo)
+            mu_low.append(m_lo)
+            mu_high.append(m_hi)
+        mu_low, mu_high, lows = np.array(mu_low), np.array(mu_high), np.array(lows)
+        can_win = (mu_high > 0) & (mu_high >= mu_low.max(axis=0))
+        cell_low = np.where(can_win, lows, np.inf).min(axis=0)
+        cell_low = np.where(mu_low.max(axis=0) > 0, cell_low, np.minimum(cell_low, self.global_size))
+        cells = cell_low.reshape(tuple(n - 1 for n in shape))
+        padded = np.pad(cells, 1, mode="edge")
+        nodes = np.full(shape, np.inf)
+        for corner in np.ndindex(2, 2, 2):
+            nodes = np.minimum(nodes, padded[corner[0]:corner[0] + shape[0], corner[1]:corner[1] + shape[1],
+                                             corner[2]:corner[2] + shape[2]])
+        rate = (self.gradation - 1.0) / math.sqrt(3.0)
+        grid = nodes
         for axis in range(3):
-            grid = _grade_along(grid, axis, step)
+            grid = _grade_along(grid, axis, rate * cell)
         self.grid, self.origin, self.cell, self.shape = grid, origin, cell, shape
-        finest = [self._raw(p.distance.samples)[0].min() for p in self.placed
-                  if getattr(p.distance, "samples", None) is not None]
-        self.h_min = float(min([grid.min(), *finest]))
-        self.h_max = float(grid.max())
+        self.h_min, self.h_max = float(grid.min()), float(grid.max())
         if self.min_size is not None:
             self.h_min = max(self.h_min, self.min_size)
         if self.max_size is not None:
@@ -211,6 +258,11 @@ class SizingField:
 
     def legend(self) -> list[dict]:
         return [p.legend() for p in self.placed]
+
+
+def _membership_at(zone: BoundZone, d: np.ndarray) -> np.ndarray:
+    """The zone's membership at distances d (0 for infinite d)."""
+    return zone.membership(np.where(np.isfinite(d), d, np.inf))
 
 
 @numba.njit(parallel=True, cache=True)
@@ -283,8 +335,19 @@ def _anchors(pattern, placement, features, geometry):
     else:
         chosen = [f for f in group if placement.every in f.kinds]
     if pattern.anchor == "curve":
-        return [(f, lambda spacing, f=f: SampledDistance(curve_samples(f, spacing))) for f in chosen]
-    return [(f, lambda spacing, f=f: SampledDistance(patch_samples(geometry, f, spacing))) for f in chosen]
+        return [(f, lambda spacing, f=f: curve_distance(f, spacing)) for f in chosen]
+    return [(f, lambda spacing, f=f: patch_distance(geometry, f, spacing)) for f in chosen]
+
+
+def _union(distances: list):
+    """One distance object for several features of the same kind."""
+    if len(distances) == 1:
+        return distances[0]
+    first = distances[0]
+    offsets = np.cumsum([0] + [len(d.vertices) for d in distances[:-1]])
+    return type(first)(np.concatenate([d.vertices for d in distances]),
+                       np.concatenate([d.simplices + o for d, o in zip(distances, offsets)]),
+                       np.concatenate([d.samples for d in distances]))
 
 
 def _no_feature(placement, features):
@@ -321,12 +384,12 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
         env["L"] = L
     where = placement.source
 
-    def number(expr, what, zone):
+    def number(expr, what, zone, finite=True):
         try:
             value = float(expr(env))
         except (ZeroDivisionError, OverflowError, ValueError):
             value = math.nan
-        if not math.isfinite(value):
+        if math.isnan(value) or (finite and not math.isfinite(value)):
             raise KnowledgeError(f"{what} of zone '{zone.id}' of pattern '{pattern.name}' is not a finite number "
                                  f"({expr.text})", where=where, fix=f"check the parameters (zone at {zone.source})")
         return value
@@ -340,12 +403,12 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
     roles = {}
     for role, (default, _) in pattern.roles.items():
         name = placement.roles.get(role, default)
-        targets = [f for f in features.patches + features.curves if name in f.names]
+        targets = [f for f in features.patches if name in f.names] or \
+            [f for f in features.curves if name in f.names]
         if targets:
-            samples = np.concatenate([
-                patch_samples(geometry, f, min(nears) / SAMPLES_PER_NEAR) if hasattr(f, "faces")
-                else curve_samples(f, min(nears) / SAMPLES_PER_NEAR) for f in targets])
-            roles[role] = SampledDistance(samples)
+            spacing = min(nears) / SAMPLES_PER_NEAR
+            roles[role] = _union([patch_distance(geometry, f, spacing) if hasattr(f, "faces")
+                                  else curve_distance(f, spacing) for f in targets])
             anchor_samples = getattr(distance, "samples", None)
             env[f"gap_{role}"] = roles[role].gap_to(distance) if anchor_samples is not None else 0.0
         else:
@@ -357,7 +420,7 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
         role = zone.distance.split(":", 1)[1] if zone.distance.startswith("ligament:") else None
         if role is not None and role not in roles:
             continue
-        if zone.active_if is not None and not number(zone.active_if, "'active_if'", zone) > 0:
+        if zone.active_if is not None and not number(zone.active_if, "'active_if'", zone, finite=False) > 0:
             continue
         far = number(zone.far, "'far'", zone) if zone.far else near
         over = number(zone.over, "'over'", zone) if zone.over else 1.0

@@ -13,6 +13,7 @@ import yaml
 
 from .errors import FuzzymeshError
 
+BOOL_1_2 = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
 FLOAT_1_2 = re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$")
 
 
@@ -53,8 +54,12 @@ def _loader_for(source: str, error=FuzzymeshError):
         pass
 
     # YAML 1.2 floats: 1e-3 and 2.5e0 are numbers, not strings (PyYAML follows YAML 1.1)
-    LocatingLoader.yaml_implicit_resolvers = {k: list(v) for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+    # YAML 1.2 booleans: only true/false (PyYAML also reads yes/no/on/off, which breaks labels like ON)
+    LocatingLoader.yaml_implicit_resolvers = {
+        k: [(tag, regexp) for tag, regexp in v if tag != "tag:yaml.org,2002:bool"]
+        for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
     LocatingLoader.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_1_2, list("-+0123456789."))
+    LocatingLoader.add_implicit_resolver("tag:yaml.org,2002:bool", BOOL_1_2, list("tTfF"))
 
     def construct_mapping(loader, node, deep=False):
         loader.flatten_mapping(node)

@@ -1,0 +1,128 @@
+"""Sizing by membership dominance: properties of the composed field, its gradation and explain."""
+import re
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from engine.explain import explain_point
+from engine.job import job_from_dict
+from engine.knowledge import load_knowledge
+from engine.pipeline import build_geometry, build_sizing
+
+KB = load_knowledge()
+_GEOMETRY = {}
+
+
+def sizing_for(job_dict):
+    job = job_from_dict(job_dict)
+    key = repr(job_dict["geometry"])
+    if key not in _GEOMETRY:
+        _GEOMETRY[key] = build_geometry(job)
+    geometry, features = _GEOMETRY[key]
+    return geometry, build_sizing(job, geometry, features, KB)
+
+
+region = st.fixed_dictionaries({
+    "centre": st.tuples(st.floats(-90, 90), st.floats(-40, 40), st.floats(0, 20)),
+    "radius": st.floats(2, 30), "size": st.floats(0.8, 6), "peak": st.floats(0.3, 1.0),
+    "transition": st.floats(0, 20)})
+
+
+def plate_job(regions, size=12.0):
+    place = [{"pattern": "uniform-region", "region": {"sphere": {"centre": list(r["centre"]), "radius": r["radius"]}},
+              "parameters": {"size": r["size"], "peak": r["peak"], "transition": r["transition"]}} for r in regions]
+    return {"geometry": {"shape": "plate_with_hole"}, "size": size, "recipe": "static-stress", "place": place}
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(regions=st.lists(region, min_size=1, max_size=4), seed=st.integers(0, 2 ** 16))
+def test_the_pattern_with_the_highest_membership_sets_the_raw_size(regions, seed):
+    geometry, sizing = sizing_for(plate_job(regions))
+    points = np.random.default_rng(seed).uniform(*geometry.bounds, size=(4000, 3))
+    audit = sizing.evaluate(points)
+    rows = np.arange(len(points))
+    assert (audit.winner >= 0).all(), "the base pattern reaches everywhere"
+    best = audit.mu.max(axis=1)
+    assert np.array_equal(audit.mu[rows, audit.winner], best)
+    assert np.array_equal(audit.raw, audit.sizes[rows, audit.winner])
+    tied = audit.mu == best[:, None]
+    assert (audit.sizes[rows, audit.winner] <= np.where(tied, audit.sizes, np.inf).min(axis=1)).all()
+    assert (audit.h <= audit.raw * (1 + 1e-12)).all()
+    loser = audit.runner_up >= 0
+    assert (audit.runner_up[loser] != audit.winner[loser]).all()
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(regions=st.lists(region, min_size=1, max_size=3), seed=st.integers(0, 2 ** 16),
+       steps=st.floats(0.01, 4.0))
+def test_graded_size_grows_no_faster_than_the_limit(regions, seed, steps):
+    """h(y) <= h(x) + (g - 1)|x - y| for neighbouring points, closer or farther than a grid cell."""
+    geometry, sizing = sizing_for(plate_job(regions, size=15.0))
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(*geometry.bounds, size=(20000, 3))
+    u = rng.normal(size=x.shape)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    y = x + steps * sizing.cell * u
+    slope = np.abs(sizing(x) - sizing(y)) / (steps * sizing.cell)
+    assert slope.max() <= (sizing.gradation - 1) * (1 + 1e-6)
+
+
+def test_gradation_connects_fine_and_coarse_regions():
+    job = {"geometry": {"shape": "plate"}, "size": 20.0,
+           "place": [{"pattern": "uniform-domain"},
+                     {"pattern": "uniform-region", "region": {"sphere": {"centre": [-50, 0, 10], "radius": 10}},
+                      "parameters": {"size": 1.0}}]}
+    geometry, sizing = sizing_for(job)
+    line = np.column_stack([np.linspace(-50, 95, 400), np.zeros(400), np.full(400, 10.0)])
+    audit = sizing.evaluate(line)
+    assert audit.h[0] == pytest.approx(1.0)
+    assert audit.graded.any(), "the jump from 1 to 20 must be graded"
+    assert np.all(np.diff(audit.h) <= (sizing.gradation - 1) * np.diff(line[:, 0]) * (1 + 1e-9) + 1e-12)
+    assert audit.h[-1] > 5 * audit.h[0]
+
+
+def test_junction_edge_is_finer_towards_the_near_plate_edge():
+    job = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 10, "recipe": "junction-edge"}
+    geometry, sizing = sizing_for(job)
+    # the cylinder (radius 25) stands at x = 60: 15 mm from the edge x = 100; same distance on the far side
+    near_side, far_side = np.array([[92.5, 0, 15]]), np.array([[27.5, 0, 15]])
+    assert sizing(near_side)[0] < 0.75 * sizing(far_side)[0]
+    centre_job = {"geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": 0}}, "size": 10,
+                  "recipe": "junction-edge"}
+    _, centred = sizing_for(centre_job)
+    assert sizing(near_side)[0] < 0.75 * centred(np.array([[32.5, 0, 15]]))[0]
+    assert [z.zone.id for z in centred.placed[1].zones] == ["junction"], "no edge-corner zone far from the edge"
+
+
+@pytest.mark.parametrize("point", [(92, 0, 15), (0, 0, 10), (60, 27, 22), (-99, -99, 1)])
+def test_explain_reports_the_numbers_of_the_sizing(point):
+    job = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 10, "recipe": "junction-edge"}
+    geometry, sizing = sizing_for(job)
+    text = explain_point(sizing, point)
+    audit = sizing.evaluate(np.array([point], dtype=float))
+    assert float(re.search(r"element size h = (\S+)", text).group(1)) == pytest.approx(audit.h[0], rel=1e-5)
+    for k, placed in enumerate(sizing.placed):
+        match = re.search(re.escape(placed.id) + r": pattern '[^']+', mu = (\S+), h = (\S+?)( |$)", text, re.M)
+        if audit.mu[0, k] > 0:
+            assert float(match.group(1).rstrip(",")) == pytest.approx(audit.mu[0, k], abs=1e-4)
+            assert float(match.group(2)) == pytest.approx(audit.sizes[0, k], rel=1e-5)
+        else:
+            assert f"{placed.id}: pattern '{placed.pattern}', mu = 0 (out of reach)" in text
+    winner = sizing.placed[audit.winner[0]]
+    assert f"winner: {winner.id}" in text
+    assert re.search(r"\.yaml:\d+:\d+", text), "explain cites file:line of the rules involved"
+
+
+def test_sizing_speed_figure(capsys):
+    """Not a timed test: prints the evaluation time of 200k points for the record."""
+    import time
+
+    geometry, sizing = sizing_for(plate_job([{"centre": (0, 0, 5), "radius": 10, "size": 1.0, "peak": 0.9,
+                                              "transition": 0}]))
+    points = np.random.default_rng(0).uniform(*geometry.bounds, size=(200_000, 3))
+    start = time.perf_counter()
+    h = sizing(points)
+    assert np.isfinite(h).all() and (h > 0).all()
+    print(f"sizing: 200k points x {len(sizing.placed)} patterns in {time.perf_counter() - start:.3f} s")
