@@ -254,7 +254,11 @@ class SizingField:
         return SizingAudit(h, raw, winner, runner_up, zone, mu, sizes)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
-        return self.evaluate(points).h
+        """h at ``points``: the graded grid alone, since it never exceeds the raw size (no audit)."""
+        h = self._graded(np.asarray(points, dtype=float).reshape(-1, 3))
+        if self.min_size is not None or self.max_size is not None:
+            h = np.clip(h, self.min_size or 0.0, self.max_size or np.inf)
+        return h
 
     def legend(self) -> list[dict]:
         return [p.legend() for p in self.placed]

@@ -126,3 +126,13 @@ def test_sizing_speed_figure(capsys):
     h = sizing(points)
     assert np.isfinite(h).all() and (h > 0).all()
     print(f"sizing: 200k points x {len(sizing.placed)} patterns in {time.perf_counter() - start:.3f} s")
+
+
+def test_the_fast_path_equals_the_audited_size():
+    """sizing(points) skips the raw composition because the graded grid never exceeds it."""
+    geometry, sizing = sizing_for({"geometry": {"shape": "plate_cylinder_junction"}, "size": 10,
+                                   "recipe": "junction-edge"})
+    points = np.random.default_rng(5).uniform(*geometry.bounds, size=(50_000, 3))
+    audit = sizing.evaluate(points)
+    assert (sizing._graded(points) <= audit.raw * (1 + 1e-12)).all()
+    assert np.allclose(sizing(points), audit.h, rtol=1e-12)
