@@ -68,11 +68,25 @@ RULEBASE = {
     "resolution": Field(INTEGER, default=101, check=in_range(11, 10001), doc="output samples for the centroid"),
     "action": Field(MAPPING, open_keys=True, doc="{output: NAME, threshold: NUMBER}: act where output >= threshold"),
 }
+PACKER_SETTINGS = {
+    "control_interval": Field(INTEGER, default=10, check=in_range(1, 10_000),
+                              doc="dynamics steps between two population-control rounds"),
+    "control_rounds": Field(INTEGER, default=8, check=in_range(0, 10_000),
+                            doc="population-control rounds per level, after which the bubbles only settle"),
+    "count_radius": Field(NUMBER, default=1.25, check=in_range(1.0, 1.5),
+                          doc="neighbours closer than count_radius x r0 count for the vacancy"),
+    "expected_neighbours": Field(MAPPING, default=None, fields={
+        "curve": Field(INTEGER, default=2, check=in_range(1, 100)),
+        "patch": Field(INTEGER, default=6, check=in_range(1, 100)),
+        "volume": Field(INTEGER, default=12, check=in_range(1, 100))},
+        doc="neighbour count of a well-packed bubble on each level"),
+}
 RULES_FILE = {
     "kind": Field(STRING, required=True),
     "id": Field(STRING, required=True, doc="the rule file's id"),
     "doc": Field(STRING, default=""),
     "rulebases": Field(MAPPING, required=True, open_keys=True, doc="NAME: rule base"),
+    "packer": Field(MAPPING, fields=PACKER_SETTINGS, doc="settings the bubble packer reads with these rules"),
 }
 
 
@@ -185,14 +199,18 @@ def _check_coverage(base: RuleBase, where: str) -> None:
                    "add a term or a rule that covers this input, so no input is silently ignored")
 
 
-def load_rules(raw: Located, source: str) -> dict[str, RuleBase]:
+def load_rules(raw: Located, source: str) -> tuple[dict[str, RuleBase], dict | None]:
+    """The file's rule bases by id, and its packer settings (None if it has none)."""
     spec = validate(raw, RULES_FILE, KnowledgeError)
     bases = {}
     for name, body in raw["rulebases"].items():
         if not isinstance(body, Located):
             raise _err(f"rule base '{name}' must be a mapping", raw["rulebases"].where(name))
         bases[f"{spec['id']}.{name}"] = _rulebase(name, body, spec["id"])
-    return bases
+    settings = spec["packer"]
+    if settings is not None and settings["expected_neighbours"] is None:
+        settings["expected_neighbours"] = validate({}, PACKER_SETTINGS["expected_neighbours"].fields)
+    return bases, settings
 
 
 # ------------------------------------------------------------------------------------- patterns
@@ -485,7 +503,7 @@ class KnowledgeBase:
     feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
     sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain",
                                                   "where": "built-in defaults"})
-    sources: dict[str, str] = field(default_factory=dict)   # item id -> file:line
+    packer_settings: dict[str, dict] = field(default_factory=dict)   # rule file id -> its packer settings
 
     def add_file(self, path: Path) -> None:
         raw = load_yaml(path, KnowledgeError)
@@ -497,8 +515,11 @@ class KnowledgeBase:
             raise _err(f"unknown or missing kind '{kind}'" if kind else "missing 'kind:'",
                        raw.where("kind") if "kind" in raw else raw.where(), f"kind is one of: {', '.join(FILE_KINDS)}")
         if kind == "rules":
-            for rb_id, base in load_rules(raw, source).items():
+            bases, settings = load_rules(raw, source)
+            for rb_id, base in bases.items():
                 self._unique(self.rulebases, rb_id, base, base.source)
+            if settings is not None:
+                self.packer_settings[str(raw["id"])] = settings
         elif kind == "pattern":
             pattern = load_pattern(raw, source)
             self._unique(self.patterns, pattern.name, pattern, raw.where("name"))

@@ -106,14 +106,14 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     with stage("sizing", timings):
         sizing = build_sizing(job, geometry, features, kb)
         try:
-            expected = check_element_limit(geometry, sizing, max_elements)
+            expected = check_element_limit(geometry, sizing, max_elements, features)
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
     log.info("sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected "
              "(%.2f s)", len(sizing.placed), ", ".join(p.id for p in sizing.placed), sizing.global_size,
              sizing.h_min, sizing.h_max, expected, timings["sizing"])
     with stage("packing", timings):
-        packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed)
+        packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed, knowledge=kb)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
     with stage("meshing", timings):
         mesh = get_mesher(job.mesher)(packing, geometry, features)

@@ -30,7 +30,8 @@ log = logging.getLogger(__name__)
 GRID_NODES = 400_000      # background grid for the gradation
 SAMPLES_PER_NEAR = 3      # anchor samples per finest size of the pattern
 TETS_PER_NODE = 5.5       # tetrahedra per node of a well-spaced Delaunay mesh
-NODES_PER_H3 = 1.0        # nodes per h^3 of volume
+NODES_PER_H3 = 0.91       # bubbles per h^3 of volume (fitted, see estimate_counts)
+NODES_PER_H2 = 0.42       # extra bubbles per h^2 of surface (fitted, see estimate_counts)
 
 
 @dataclass
@@ -448,20 +449,37 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
 
 # ------------------------------------------------------------------------- count estimate
 
-def estimate_counts(geometry, sizing, samples: int = 200_000, seed: int = 0) -> tuple[float, float]:
-    """Expected (nodes, tetrahedra): the volume integral of the node density 1/h^3 (Monte Carlo)."""
+def estimate_counts(geometry, sizing, features=None, samples: int = 400_000, seed: int = 0) -> tuple[float, float]:
+    """Expected (nodes, tetrahedra) of a bubble packing of the sizing field.
+
+    nodes = NODES_PER_H3 * integral of h^-3 over the volume + NODES_PER_H2 * integral
+    of h^-2 over the surface + integral of h^-1 along the feature curves + corners
+    (Monte Carlo, seeded). The constants were fitted to bubble packings of cubes,
+    plates, a cylinder and an L-bracket (within 6 %): bubbles pack the volume at
+    about 0.91 / h^3, and the surface layer adds 0.42 / h^2.
+    """
+    import trimesh
+
     rng = np.random.default_rng(seed)
     lo, hi = geometry.bounds
     points = rng.uniform(lo, hi, size=(samples, 3))
     inside = geometry.contains(points)
-    density = float(np.mean(1.0 / sizing(points[inside]) ** 3)) if inside.any() else 1.0 / sizing.h_min ** 3
-    nodes = NODES_PER_H3 * geometry.volume * density
+    volume_density = float(np.mean(sizing(points[inside]) ** -3.0)) if inside.any() else sizing.h_min ** -3.0
+    on_surface, _ = trimesh.sample.sample_surface(geometry.mesh, samples // 4, seed=seed)
+    nodes = NODES_PER_H3 * geometry.volume * volume_density \
+        + NODES_PER_H2 * geometry.area * float(np.mean(sizing(on_surface) ** -2.0))
+    if features is not None:
+        for curve in features.curves:
+            if curve.on_surface:
+                s = np.linspace(0.0, curve.length, 200)
+                nodes += curve.length * float(np.mean(1.0 / sizing(curve.point_at(s))))
+        nodes += len(features.corners)
     return nodes, nodes * TETS_PER_NODE
 
 
-def check_element_limit(geometry, sizing, max_elements: float) -> float:
+def check_element_limit(geometry, sizing, max_elements: float, features=None) -> float:
     """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra."""
-    _, tets = estimate_counts(geometry, sizing)
+    _, tets = estimate_counts(geometry, sizing, features)
     if not math.isfinite(tets) or tets > max_elements:
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {max_elements:.3g}); "

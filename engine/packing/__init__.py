@@ -24,16 +24,22 @@ class Packing:
     entity: np.ndarray          # (n,) index of the corner / curve / patch in Features, -1 in the volume
     radius: np.ndarray          # (n,) half the target size at the node
     stats: dict = field(default_factory=dict)
+    ids: np.ndarray | None = None   # (n,) bubble ids, cited by population-control events
+    events: list = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.points)
 
     @staticmethod
     def concatenate(parts: list["Packing"], stats: dict | None = None) -> "Packing":
+        ids = None
+        if all(p.ids is not None for p in parts):
+            ids = np.concatenate([p.ids for p in parts]).astype(np.int64)
         return Packing(np.concatenate([p.points for p in parts]).reshape(-1, 3),
                        np.concatenate([p.level for p in parts]).astype(np.int8),
                        np.concatenate([p.entity for p in parts]).astype(np.int64),
-                       np.concatenate([p.radius for p in parts]), stats or {})
+                       np.concatenate([p.radius for p in parts]), stats or {}, ids,
+                       [e for p in parts for e in p.events])
 
 
 PACKERS: dict = {}
@@ -57,6 +63,6 @@ def packer_names() -> list[str]:
 
 
 def _load_plugins() -> None:
-    from . import lattice  # noqa: F401  (registers the built-in packers)
+    from . import bubble, lattice  # noqa: F401  (registers the built-in packers)
     for ep in entry_points(group="fuzzymesh.packers"):
         PACKERS.setdefault(ep.name, ep.load())

@@ -22,7 +22,7 @@ CANDIDATES_PER_H2 = 8.0          # surface candidates per h^2 of area before thi
 
 
 @register_packer("lattice")
-def pack_lattice(geometry, features, sizing, *, seed: int = 0) -> Packing:
+def pack_lattice(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> Packing:
     rng = np.random.default_rng(seed)
     parts = [_corner_nodes(features, sizing)]
     parts.append(_curve_nodes(features, sizing, existing=parts[0].points))

@@ -1,0 +1,290 @@
+"""The ``bubble`` packer: the paper's dynamic bubbles with fuzzy population control.
+
+Level by level (corners fixed; then curves, patches, the volume, each with the
+lower levels frozen), bubbles of diameter d = h(x) start near their final
+count (curves at equal steps of the integral of 1/h, patches and volume from
+density-following samples, as the lattice packer) and move under Shimada's
+interbubble force: m s'' + c s' = f, integrated with the classical 4th-order
+Runge-Kutta method (forces re-evaluated at every stage), 70 % of critical
+damping. Every ``control_interval`` steps the population rules of
+``knowledge/population.yaml`` delete strongly overlapping bubbles and add
+bubbles next to open ones; each event is logged with its rule and firing
+degree. A level ends when the largest step is below TOLERANCE x h, or at
+MAX_STEPS.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..sizing import estimate_counts
+from . import CORNER, CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
+from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
+from .forces import forces, neighbour_lists, proximity
+from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
+
+log = logging.getLogger(__name__)
+
+MASS = 1.0
+STIFFNESS = 1.0                  # k0, per unit of r0
+DAMPING_RATIO = 0.7              # of critical damping 2 sqrt(m k0)
+TIME_STEP = 0.25                 # in units of sqrt(m / k0); RK4 is stable well beyond the stiffest pair
+MAX_STEPS = {CURVE: 150, PATCH: 150, VOLUME: 150}
+TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
+NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 24}
+SKIN = 0.3                       # rebuild neighbour lists once a bubble moved this x h since the last build
+
+
+@dataclass
+class Event:
+    bubble: int          # bubble id
+    level: str
+    iteration: int
+    action: str          # "delete" | "insert"
+    rule: str            # id of the rule that fired most strongly
+    firing: float
+
+
+@dataclass
+class LevelState:
+    """The bubbles of one level while it packs, and the frozen bubbles they push against."""
+
+    level: int
+    x: np.ndarray
+    entity: np.ndarray
+    ids: np.ndarray
+    frozen: np.ndarray
+    v: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.v = np.zeros_like(self.x)
+
+
+class PopulationControl:
+    """The population rules and packer settings from the knowledge base."""
+
+    def __init__(self, knowledge):
+        self.delete = knowledge.rulebases["population.delete"]
+        self.insert = knowledge.rulebases["population.insert"]
+        self.settings = knowledge.packer_settings["population"]
+
+    def decide(self, rule_base, inputs):
+        outputs, firing = rule_base.evaluate(inputs)
+        action = rule_base.extra["action"]
+        q = outputs[action["output"]]
+        strongest = np.argmax(firing, axis=1)
+        return q, q >= action["threshold"], strongest, firing[np.arange(len(q)), strongest]
+
+
+@register_packer("bubble")
+def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, initial_density: float = 1.0) -> Packing:
+    """Pack bubbles level by level; ``initial_density`` scales the starting count (for tests of the rules)."""
+    from ..knowledge import load_knowledge
+
+    rng = np.random.default_rng(seed)
+    control = PopulationControl(knowledge or load_knowledge())
+    events: list[Event] = []
+    timings, counters = {}, {"next_id": 0}
+    corners = _corner_nodes(features, sizing)
+    parts = [_with_ids(corners, counters)]
+    constraints = {CURVE: CurveConstraint(features), PATCH: PatchConstraint(geometry, features),
+                   VOLUME: VolumeConstraint(geometry)}
+    initial_counts = {}
+    for level in (CURVE, PATCH, VOLUME):
+        start = time.perf_counter()
+        frozen = Packing.concatenate(parts)
+        start_nodes = _initial(level, geometry, features, sizing, frozen, rng, initial_density)
+        initial_counts[LEVELS[level]] = len(start_nodes)
+        state = LevelState(level, start_nodes.points, start_nodes.entity,
+                           _new_ids(len(start_nodes), counters), frozen.points)
+        steps = _relax(state, constraints[level], geometry, sizing, control, rng, events, counters)
+        points = state.x
+        parts.append(Packing(points, np.full(len(points), level), state.entity, sizing(points) / 2,
+                             ids=state.ids))
+        timings[LEVELS[level]] = time.perf_counter() - start
+        log.info("packing %s: %d bubbles (started with %d) in %d steps, %.2f s", LEVELS[level], len(points),
+                 initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
+    packing = Packing.concatenate(parts)
+    packing.events = events
+    packing.stats = _statistics(packing, geometry, features, sizing, initial_counts, timings, events)
+    return packing
+
+
+def _with_ids(packing: Packing, counters) -> Packing:
+    packing.ids = _new_ids(len(packing), counters)
+    return packing
+
+
+def _new_ids(count: int, counters) -> np.ndarray:
+    ids = np.arange(counters["next_id"], counters["next_id"] + count)
+    counters["next_id"] += count
+    return ids
+
+
+def _initial(level, geometry, features, sizing, frozen, rng, density):
+    """Starting bubbles of a level, about ``density`` times the count the sizing field asks for."""
+    scaled = _Scaled(sizing, density ** (-1.0 / {CURVE: 1, PATCH: 2, VOLUME: 3}[level]))
+    if level == CURVE:
+        return _curve_nodes(features, scaled, existing=frozen.points)
+    if level == PATCH:
+        return _patch_nodes(geometry, features, scaled, frozen, rng)
+    return _volume_nodes(geometry, scaled, frozen, rng)
+
+
+class _Scaled:
+    """A sizing field times a constant (to start with more or fewer bubbles)."""
+
+    def __init__(self, sizing, factor: float):
+        self.sizing, self.factor = sizing, factor
+        self.h_min, self.h_max = sizing.h_min * factor, sizing.h_max * factor
+
+    def __call__(self, points):
+        return self.sizing(points) * self.factor
+
+
+def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events, counters) -> int:
+    """Integrate the level's bubbles to equilibrium with population control; return the step count."""
+    settings = control.settings
+    interval, rounds = settings["control_interval"], settings["control_rounds"]
+    damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
+    k = NEIGHBOURS[state.level]
+    step = 0
+    neighbours, anchor = None, None
+    for step in range(1, MAX_STEPS[state.level] + 1):
+        n = len(state.x)
+        if n == 0:
+            return 0
+        everything = np.concatenate([state.x, state.frozen])
+        h = sizing(everything)
+        if neighbours is None or len(neighbours) != n or \
+                np.any(np.linalg.norm(state.x - anchor, axis=1) > SKIN * h[:n]):
+            neighbours, anchor = neighbour_lists(everything, n, k), state.x.copy()
+        _, frame = constraint.frame(state.x, state.entity)
+
+        def acceleration(x, v):
+            f = STIFFNESS * forces(np.concatenate([x, state.frozen]), h, neighbours, n)
+            return (constraint.tangential(f, frame) - damping * v) / MASS
+
+        x0, v0 = state.x, state.v
+        k1x, k1v = v0, acceleration(x0, v0)
+        k2x, k2v = v0 + 0.5 * TIME_STEP * k1v, acceleration(x0 + 0.5 * TIME_STEP * k1x, v0 + 0.5 * TIME_STEP * k1v)
+        k3x, k3v = v0 + 0.5 * TIME_STEP * k2v, acceleration(x0 + 0.5 * TIME_STEP * k2x, v0 + 0.5 * TIME_STEP * k2v)
+        k4x, k4v = v0 + TIME_STEP * k3v, acceleration(x0 + TIME_STEP * k3x, v0 + TIME_STEP * k3v)
+        x1 = x0 + TIME_STEP / 6.0 * (k1x + 2 * k2x + 2 * k3x + k4x)
+        v1 = v0 + TIME_STEP / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        x1, frame1 = constraint.frame(x1, state.entity)
+        v1 = constraint.tangential(v1, frame1) if frame1 is not None else v1
+        if state.level == VOLUME:
+            escaped = ~geometry.contains(x1)
+            x1[escaped], v1[escaped] = x0[escaped], 0.0
+        moved = np.linalg.norm(x1 - x0, axis=1) / h[:n]
+        state.x, state.v = x1, v1
+        changed = False
+        if step % interval == 0 and step // interval <= rounds:
+            changed = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, k)
+            if changed:
+                neighbours = None
+        if not changed and step > interval * rounds and moved.max() < TOLERANCE:
+            break
+    return step
+
+
+def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, k) -> bool:
+    """One round of fuzzy population control; True if bubbles were deleted or inserted."""
+    n = len(state.x)
+    everything = np.concatenate([state.x, state.frozen])
+    h = sizing(everything)
+    neighbours = neighbour_lists(everything, n, k)
+    settings = control.settings
+    overlap, count = proximity(everything, h, neighbours, n, settings["count_radius"])
+    level_name = LEVELS[state.level]
+    # deletions: highest q first, never both of an overlapping pair
+    q, act, rule, firing = control.decide(control.delete, {"overlap": overlap})
+    delete = np.zeros(n, bool)
+    if act.any():
+        i = np.repeat(np.arange(n), neighbours.shape[1])
+        j = neighbours.ravel()
+        pair = (j >= 0) & (j < n)
+        i, j = i[pair], j[pair]
+        close = np.linalg.norm(everything[i] - everything[j], axis=1) < 0.5 * (h[i] + h[j])
+        both = close & act[i] & act[j]
+        priority = q + 1e-9 * rng.random(n)     # equal q: a seeded random order, not the index order
+        loses = both & (priority[i] < priority[j])
+        delete = act.copy()
+        delete[i[loses]] = False
+    # insertions next to open bubbles (not next to one being deleted)
+    vacancy = settings["expected_neighbours"][level_name] / np.maximum(count, 1)
+    qi, act_i, rule_i, firing_i = control.decide(control.insert, {"vacancy": vacancy})
+    act_i &= ~delete
+    new_x = np.zeros((0, 3))
+    sources = np.flatnonzero(act_i)
+    if len(sources):
+        new_x, sources = _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng)
+    for idx in np.flatnonzero(delete):
+        events.append(Event(int(state.ids[idx]), level_name, step, "delete", control.delete.rules[rule[idx]].id,
+                            float(firing[idx])))
+    new_ids = _new_ids(len(new_x), counters)
+    for idx, new_id in zip(sources, new_ids):
+        events.append(Event(int(new_id), level_name, step, "insert", control.insert.rules[rule_i[idx]].id,
+                            float(firing_i[idx])))
+    if not delete.any() and not len(new_x):
+        return False
+    keep = ~delete
+    state.x = np.concatenate([state.x[keep], new_x])
+    state.v = np.concatenate([state.v[keep], np.zeros_like(new_x)])
+    state.entity = np.concatenate([state.entity[keep], state.entity[sources]])
+    state.ids = np.concatenate([state.ids[keep], new_ids])
+    return True
+
+
+def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng):
+    """A new bubble at distance h on the open side of each source bubble; spots too close to others dropped."""
+    x = everything[sources]
+    rows = neighbours[sources]
+    valid = rows >= 0
+    towards = np.where(valid[..., None], everything[np.maximum(rows, 0)] - x[:, None, :], 0.0)
+    towards /= np.maximum(np.linalg.norm(towards, axis=2, keepdims=True), 1e-300)
+    direction = -towards.sum(axis=1)
+    lonely = np.linalg.norm(direction, axis=1) < 1e-9
+    direction[lonely] = rng.normal(size=(int(lonely.sum()), 3))
+    _, frame = constraint.frame(x, state.entity[sources])
+    if frame is not None:
+        direction = constraint.tangential(direction, frame)
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    spots = constraint.project(x + h[sources, None] * direction, state.entity[sources])
+    ok = np.ones(len(spots), bool)
+    if state.level == VOLUME:
+        ok &= geometry.contains(spots)
+    gap, _ = cKDTree(everything).query(spots)
+    ok &= gap > 0.5 * h[sources]
+    # two new bubbles may not crowd each other either: keep the first of each close group
+    spots, sources = spots[ok], sources[ok]
+    if len(spots) > 1:
+        pairs = cKDTree(spots).query_pairs(0.5 * float(h[sources].min()), output_type="ndarray")
+        drop = np.zeros(len(spots), bool)
+        drop[np.maximum(pairs[:, 0], pairs[:, 1])] = True
+        spots, sources = spots[~drop], sources[~drop]
+    return spots, sources
+
+
+def _statistics(packing, geometry, features, sizing, initial_counts, timings, events) -> dict:
+    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0, events, timings."""
+    expected_nodes, _ = estimate_counts(geometry, sizing, features)
+    h = 2 * packing.radius
+    distance, index = cKDTree(packing.points).query(packing.points, k=2, workers=-1)
+    ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
+    return {
+        "nodes": len(packing), "expected_nodes": expected_nodes,
+        **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
+        "initial": initial_counts,
+        "nearest_over_r0": {"median": float(np.median(ratio)), "within_0.85_1.15": float(
+            np.mean((ratio >= 0.85) & (ratio <= 1.15))), "p01": float(np.percentile(ratio, 1)),
+            "p99": float(np.percentile(ratio, 99))},
+        "deleted": sum(e.action == "delete" for e in events),
+        "inserted": sum(e.action == "insert" for e in events),
+        "seconds": timings,
+    }

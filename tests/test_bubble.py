@@ -1,0 +1,103 @@
+"""The bubble packer: regular spacing, bubbles on their entities, counts, fuzzy population control."""
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import igl
+from engine.job import job_from_dict
+from engine.knowledge import load_knowledge
+from engine.packing import CURVE, PATCH, VOLUME, get_packer
+from engine.pipeline import build_geometry, build_sizing
+
+KB = load_knowledge()
+_CACHE = {}
+
+
+def setup(job):
+    key = repr(job)
+    if key not in _CACHE:
+        j = job_from_dict(job)
+        geometry, features = build_geometry(j)
+        _CACHE[key] = geometry, features, build_sizing(j, geometry, features, KB)
+    return _CACHE[key]
+
+
+def pack(job, packer="bubble", **options):
+    geometry, features, sizing = setup(job)
+    return get_packer(packer)(geometry, features, sizing, seed=0, knowledge=KB, **options)
+
+
+def spacing_share(packing, sizing):
+    """Share of bubbles whose nearest neighbour is within [0.85, 1.15] of the stable distance."""
+    h = sizing(packing.points)
+    distance, index = cKDTree(packing.points).query(packing.points, k=2)
+    ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
+    return float(np.mean((ratio >= 0.85) & (ratio <= 1.15)))
+
+
+CUBE = {"geometry": {"shape": "plate", "parameters": {"length": 60, "width": 60, "thickness": 60}}, "size": 5.0}
+CYLINDER = {"geometry": {"shape": "cylinder"}, "size": 6.0}
+JUNCTION = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0, "recipe": "junction-edge"}
+
+
+@pytest.mark.parametrize("job", [CUBE, CYLINDER], ids=["cube", "cylinder"])
+def test_bubbles_settle_at_the_stable_distance(job):
+    _, _, sizing = setup(job)
+    bubble = pack(job)
+    lattice = pack(job, "lattice")
+    share, baseline = spacing_share(bubble, sizing), spacing_share(lattice, sizing)
+    print(f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice (= initial placement) {baseline:.3f}")
+    assert share >= 0.90
+    assert share > baseline + 0.2
+
+
+def test_bubbles_lie_on_their_entities():
+    geometry, features, _ = setup(JUNCTION)
+    packing = pack(JUNCTION)
+    tolerance = 1e-9 * geometry.scale
+    for k in np.unique(packing.entity[packing.level == CURVE]):
+        points = packing.points[(packing.level == CURVE) & (packing.entity == k)]
+        line = features.curves[k].polyline
+        segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))]).astype(np.int64)
+        squared, _, _ = igl.point_mesh_squared_distance(points, line, segments)
+        assert np.sqrt(squared).max() <= tolerance
+    mesh = geometry.mesh
+    for k in np.unique(packing.entity[packing.level == PATCH]):
+        points = packing.points[(packing.level == PATCH) & (packing.entity == k)]
+        faces = mesh.faces[features.patches[k].faces].astype(np.int64)
+        squared, _, _ = igl.point_mesh_squared_distance(points, np.asarray(mesh.vertices), faces)
+        assert np.sqrt(squared).max() <= tolerance
+    assert geometry.contains(packing.points[packing.level == VOLUME]).all()
+
+
+def test_count_matches_the_sizing_field_estimate_on_the_junction():
+    packing = pack(JUNCTION)
+    ratio = len(packing) / packing.stats["expected_nodes"]
+    print(f"junction-edge: {len(packing)} bubbles, estimate {packing.stats['expected_nodes']:.0f}, ratio {ratio:.3f}")
+    assert 0.9 <= ratio <= 1.1
+
+
+@pytest.mark.parametrize("density,action,rule_base", [(2.0, "delete", "delete"), (0.5, "insert", "insert")])
+def test_population_control_restores_the_count(density, action, rule_base):
+    normal = len(pack(CUBE))
+    packing = pack(CUBE, initial_density=density)
+    start = sum(packing.stats["initial"].values())
+    print(f"start {start}, end {len(packing)}, normal {normal}")
+    assert abs(start - normal) > 0.3 * normal, "the start is far from the target"
+    assert abs(len(packing) - normal) <= 0.1 * normal
+    acted = [e for e in packing.events if e.action == action]
+    assert len(acted) >= 0.2 * abs(start - normal)
+    rule_ids = {r.id for r in KB.rulebases[f"population.{rule_base}"].rules}
+    assert {e.rule for e in acted} <= rule_ids
+    assert all(0 < e.firing <= 1 for e in acted)
+    ids = set(packing.ids.tolist())
+    if action == "insert":
+        survivors = {e.bubble for e in acted} & ids
+        assert len(survivors) >= 0.7 * len(acted), "inserted bubbles stay, under their own ids"
+    else:
+        assert not ({e.bubble for e in acted} & ids), "deleted bubbles are gone"
+
+
+def test_same_seed_same_packing():
+    a, b = pack(CYLINDER), pack(CYLINDER)
+    assert np.array_equal(a.points, b.points) and np.array_equal(a.level, b.level)
