@@ -52,14 +52,16 @@ class FeatureDistance:
         self.simplices = np.ascontiguousarray(remap[simplices], dtype=np.int64)
         self.samples = np.asarray(samples, dtype=float).reshape(-1, 3)
         self.lo, self.hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
+        self.tree = igl.AABB()
+        self.tree.init(self.vertices, self.simplices)
 
     def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
         """Distances; ``inf`` where farther than ``bound``."""
         distance = np.full(len(points), np.inf)
         near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1)
         if near.any():
-            squared, _, _ = igl.point_mesh_squared_distance(
-                np.ascontiguousarray(points[near], dtype=np.float64), self.vertices, self.simplices)
+            squared, _, _ = self.tree.squared_distance(
+                self.vertices, self.simplices, np.ascontiguousarray(points[near], dtype=np.float64))
             distance[near] = np.sqrt(squared)
         distance[distance > bound] = np.inf
         return distance

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
+from ._numba import numba
 import numpy as np
 import skfuzzy
 

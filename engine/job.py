@@ -51,7 +51,7 @@ def job_schema() -> dict:
         "place": Field(LIST, default=[], doc="pattern placements (see docs/rules.md)"),
         "knowledge": Field(LIST, default=[], items=Field(STRING),
                            doc="extra rule/pattern/recipe files or folders, relative to the job file"),
-        "packer": Field(STRING, default="lattice", choices=tuple(packer_names()), doc="node placement method"),
+        "packer": Field(STRING, default="bubble", choices=tuple(packer_names()), doc="node placement method"),
         "mesher": Field(STRING, default="delaunay", choices=tuple(mesher_names()), doc="connection method"),
         "seed": Field(INTEGER, default=0, check=non_negative,
                       doc="random seed >= 0; same input and seed give the same mesh"),

@@ -16,7 +16,7 @@ import logging
 import math
 from dataclasses import dataclass, field
 
-import numba
+from ._numba import numba
 import numpy as np
 from scipy import ndimage
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..sizing import estimate_counts
+from ..sizing import NODES_PER_H3, estimate_counts
 from . import CORNER, CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
 from .forces import forces, neighbour_lists, proximity
@@ -36,7 +36,10 @@ TIME_STEP = 0.25                 # in units of sqrt(m / k0); RK4 is stable well 
 MAX_STEPS = {CURVE: 150, PATCH: 150, VOLUME: 150}
 TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
 NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 24}
-SKIN = 0.3                       # rebuild neighbour lists once a bubble moved this x h since the last build
+SKIN = 0.3                       # a bubble that moved this x h since the last build is stale
+STALE_SHARE = 1e-3               # rebuild the neighbour lists once this share of bubbles is stale
+REBUILD_EVERY = 40               # ... or after this many steps
+INSIDE_CHECK_EVERY = 5           # volume bubbles outside the solid go back to their last checked place
 
 
 @dataclass
@@ -132,7 +135,7 @@ def _initial(level, geometry, features, sizing, frozen, rng, density):
         return _curve_nodes(features, scaled, existing=frozen.points)
     if level == PATCH:
         return _patch_nodes(geometry, features, scaled, frozen, rng)
-    return _volume_nodes(geometry, scaled, frozen, rng)
+    return _volume_nodes(geometry, sizing, frozen, rng, density=NODES_PER_H3 * density)
 
 
 class _Scaled:
@@ -152,18 +155,21 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     interval, rounds = settings["control_interval"], settings["control_rounds"]
     damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
     k = NEIGHBOURS[state.level]
-    step = 0
+    step, built = 0, 0
     neighbours, anchor = None, None
+    checked = state.x.copy()
+    frame = None
     for step in range(1, MAX_STEPS[state.level] + 1):
         n = len(state.x)
         if n == 0:
             return 0
         everything = np.concatenate([state.x, state.frozen])
         h = sizing(everything)
-        if neighbours is None or len(neighbours) != n or \
-                np.any(np.linalg.norm(state.x - anchor, axis=1) > SKIN * h[:n]):
-            neighbours, anchor = neighbour_lists(everything, n, k), state.x.copy()
-        _, frame = constraint.frame(state.x, state.entity)
+        if neighbours is None or len(neighbours) != n or step - built >= REBUILD_EVERY or \
+                np.count_nonzero(np.linalg.norm(state.x - anchor, axis=1) > SKIN * h[:n]) > STALE_SHARE * n:
+            neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
+        if frame is None or len(frame) != n:
+            _, frame = constraint.frame(state.x, state.entity)
 
         def acceleration(x, v):
             f = STIFFNESS * forces(np.concatenate([x, state.frozen]), h, neighbours, n)
@@ -176,29 +182,34 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
         k4x, k4v = v0 + TIME_STEP * k3v, acceleration(x0 + TIME_STEP * k3x, v0 + TIME_STEP * k3v)
         x1 = x0 + TIME_STEP / 6.0 * (k1x + 2 * k2x + 2 * k3x + k4x)
         v1 = v0 + TIME_STEP / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        x1, frame1 = constraint.frame(x1, state.entity)
-        v1 = constraint.tangential(v1, frame1) if frame1 is not None else v1
-        if state.level == VOLUME:
-            escaped = ~geometry.contains(x1)
-            x1[escaped], v1[escaped] = x0[escaped], 0.0
+        x1, frame = constraint.frame(x1, state.entity)
+        v1 = constraint.tangential(v1, frame) if frame is not None else v1
         moved = np.linalg.norm(x1 - x0, axis=1) / h[:n]
         state.x, state.v = x1, v1
+        if state.level == VOLUME and step % INSIDE_CHECK_EVERY == 0:
+            escaped = ~geometry.contains(state.x)
+            state.x[escaped], state.v[escaped] = checked[escaped], 0.0
+            checked = state.x.copy()
         changed = False
         if step % interval == 0 and step // interval <= rounds:
-            changed = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, k)
+            changed = _control(state, constraint, geometry, sizing, control, rng, events, counters, step,
+                               neighbours)
             if changed:
-                neighbours = None
+                neighbours, frame = None, None
+                checked = state.x.copy()
         if not changed and step > interval * rounds and moved.max() < TOLERANCE:
             break
+    if state.level == VOLUME:
+        escaped = ~geometry.contains(state.x)
+        state.x[escaped] = checked[escaped]
     return step
 
 
-def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, k) -> bool:
+def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours) -> bool:
     """One round of fuzzy population control; True if bubbles were deleted or inserted."""
     n = len(state.x)
     everything = np.concatenate([state.x, state.frozen])
     h = sizing(everything)
-    neighbours = neighbour_lists(everything, n, k)
     settings = control.settings
     overlap, count = proximity(everything, h, neighbours, n, settings["count_radius"])
     level_name = LEVELS[state.level]

@@ -15,17 +15,28 @@ class _EntityProjection:
     """Closest points on each entity's simplices (segments or triangles), grouped by entity."""
 
     def __init__(self, vertices_by_entity: dict, simplices_by_entity: dict):
-        self.vertices = {k: np.ascontiguousarray(v, dtype=np.float64) for k, v in vertices_by_entity.items()}
-        self.simplices = {k: np.ascontiguousarray(s, dtype=np.int64) for k, s in simplices_by_entity.items()}
+        self.vertices, self.simplices, self.trees = {}, {}, {}
+        for key, simplices in simplices_by_entity.items():
+            used, local = np.unique(simplices, return_inverse=True)
+            self.vertices[key] = np.ascontiguousarray(vertices_by_entity[key][used], dtype=np.float64)
+            self.simplices[key] = np.ascontiguousarray(local.reshape(simplices.shape), dtype=np.int64)
+
+    def _tree(self, key):
+        if key not in self.trees:   # built once per entity, reused at every step
+            tree = igl.AABB()
+            tree.init(self.vertices[key], self.simplices[key])
+            self.trees[key] = tree
+        return self.trees[key]
 
     def closest(self, x: np.ndarray, entity: np.ndarray):
         """Closest point on the bubble's own entity, and the index of the simplex it lies on."""
         out = np.empty_like(x)
         simplex = np.zeros(len(x), dtype=np.int64)
-        for key in np.unique(entity):
-            rows = np.flatnonzero(entity == key)
-            _, index, closest = igl.point_mesh_squared_distance(
-                np.ascontiguousarray(x[rows]), self.vertices[key], self.simplices[key])
+        order = np.argsort(entity, kind="stable")
+        keys, starts = np.unique(entity[order], return_index=True)
+        for key, rows in zip(keys, np.split(order, starts[1:])):
+            _, index, closest = self._tree(key).squared_distance(
+                self.vertices[key], self.simplices[key], np.ascontiguousarray(x[rows]))
             out[rows], simplex[rows] = closest, index
         return out, simplex
 

@@ -9,7 +9,7 @@ scaled by r0 so that bubbles of every size move at the same relative pace
 """
 from __future__ import annotations
 
-import numba
+from .._numba import numba
 import numpy as np
 from scipy.spatial import cKDTree
 

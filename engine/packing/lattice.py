@@ -108,9 +108,14 @@ def _patch_nodes(geometry, features, sizing, boundary: Packing, rng) -> Packing:
     return Packing(points, np.full(len(points), PATCH), patch[keep], h[len(boundary):][keep] / 2)
 
 
-def _octree_lattice(geometry, sizing, rng) -> np.ndarray:
+def _octree_lattice(geometry, sizing, rng, density: float | None = None) -> np.ndarray:
+    """Jittered centres of octree cells matched to h. With ``density`` (nodes per h^3), cells no
+    larger than density^(-1/3) h emit with probability (s / (density^(-1/3) h))^3, so the expected
+    count follows density / h^3 even where the octree level jumps by 2."""
     lo, hi = geometry.bounds
-    size = sizing.h_max * SPACING_SLACK
+    slack = SPACING_SLACK if density is None else 1.0
+    reach = 1.0 if density is None else density ** (-1.0 / 3.0)
+    size = sizing.h_max * slack * reach * (1 - 1e-9)   # the coarsest cells emit (no round-off split)
     counts = np.maximum(1, np.ceil((hi - lo) / size)).astype(int)
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
@@ -118,15 +123,16 @@ def _octree_lattice(geometry, sizing, rng) -> np.ndarray:
     octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
     while len(centres):
         h = sizing(centres)
-        done = size <= h * SPACING_SLACK
-        emitted.append(centres[done] + rng.uniform(-JITTER, JITTER, (int(done.sum()), 3)) * size)
+        done = size <= h * slack * reach
+        keep = done if density is None else done & (rng.random(len(centres)) < (size / (h * reach)) ** 3)
+        emitted.append(centres[keep] + rng.uniform(-JITTER, JITTER, (int(keep.sum()), 3)) * size)
         size /= 2
         centres = (centres[~done][:, None, :] + 0.5 * size * octants[None]).reshape(-1, 3)
     return np.concatenate(emitted)
 
 
-def _volume_nodes(geometry, sizing, boundary: Packing, rng) -> Packing:
-    candidates = _octree_lattice(geometry, sizing, rng)
+def _volume_nodes(geometry, sizing, boundary: Packing, rng, density: float | None = None) -> Packing:
+    candidates = _octree_lattice(geometry, sizing, rng, density)
     candidates = candidates[geometry.contains(candidates)]
     h = sizing(candidates)
     if len(boundary):
