@@ -30,8 +30,8 @@ log = logging.getLogger(__name__)
 GRID_NODES = 400_000      # background grid for the gradation
 SAMPLES_PER_NEAR = 3      # anchor samples per finest size of the pattern
 TETS_PER_NODE = 5.5       # tetrahedra per node of a well-spaced Delaunay mesh
-NODES_PER_H3 = 0.91       # bubbles per h^3 of volume (fitted, see estimate_counts)
-NODES_PER_H2 = 0.42       # extra bubbles per h^2 of surface (fitted, see estimate_counts)
+NODES_PER_H3 = 0.94       # bubbles per h^3 of volume (fitted, see estimate_counts)
+NODES_PER_H2 = 0.30       # extra bubbles per h^2 of surface (fitted, see estimate_counts)
 
 
 @dataclass
@@ -456,7 +456,7 @@ def estimate_counts(geometry, sizing, features=None, samples: int = 400_000, see
     of h^-2 over the surface + integral of h^-1 along the feature curves + corners
     (Monte Carlo, seeded). The constants were fitted to bubble packings of cubes,
     plates, a cylinder and an L-bracket (within 6 %): bubbles pack the volume at
-    about 0.91 / h^3, and the surface layer adds 0.42 / h^2.
+    about 0.94 / h^3, and the surface layer adds 0.30 / h^2.
     """
     import trimesh
 

@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from ..sizing import NODES_PER_H3, estimate_counts
 from . import CORNER, CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
-from .forces import forces, neighbour_lists, proximity
+from .forces import deletions, forces, morton_order, neighbour_lists, proximity
 from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
 
 log = logging.getLogger(__name__)
@@ -155,6 +155,7 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     interval, rounds = settings["control_interval"], settings["control_rounds"]
     damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
     k = NEIGHBOURS[state.level]
+    state.frozen = state.frozen[morton_order(state.frozen)]   # neighbours close in memory: fewer cache misses
     step, built = 0, 0
     neighbours, anchor = None, None
     checked = state.x.copy()
@@ -163,10 +164,14 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
         n = len(state.x)
         if n == 0:
             return 0
-        everything = np.concatenate([state.x, state.frozen])
-        h = sizing(everything)
         if neighbours is None or len(neighbours) != n or step - built >= REBUILD_EVERY or \
-                np.count_nonzero(np.linalg.norm(state.x - anchor, axis=1) > SKIN * h[:n]) > STALE_SHARE * n:
+                np.count_nonzero(((state.x - anchor) ** 2).sum(axis=1) > (SKIN * h[:n]) ** 2) > STALE_SHARE * n:
+            order = morton_order(state.x)
+            state.x, state.v, state.entity, state.ids = state.x[order], state.v[order], state.entity[order], \
+                state.ids[order]
+            checked, frame = checked[order], None
+            everything = np.concatenate([state.x, state.frozen])
+            h = sizing(everything)   # bubbles move < SKIN h between rebuilds: their diameters are kept till then
             neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
         if frame is None or len(frame) != n:
             _, frame = constraint.frame(state.x, state.entity)
@@ -217,16 +222,8 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
     q, act, rule, firing = control.decide(control.delete, {"overlap": overlap})
     delete = np.zeros(n, bool)
     if act.any():
-        i = np.repeat(np.arange(n), neighbours.shape[1])
-        j = neighbours.ravel()
-        pair = (j >= 0) & (j < n)
-        i, j = i[pair], j[pair]
-        close = np.linalg.norm(everything[i] - everything[j], axis=1) < 0.5 * (h[i] + h[j])
-        both = close & act[i] & act[j]
         priority = q + 1e-9 * rng.random(n)     # equal q: a seeded random order, not the index order
-        loses = both & (priority[i] < priority[j])
-        delete = act.copy()
-        delete[i[loses]] = False
+        delete = deletions(everything, h, neighbours, n, act, priority)
     # insertions next to open bubbles (not next to one being deleted)
     vacancy = settings["expected_neighbours"][level_name] / np.maximum(count, 1)
     qi, act_i, rule_i, firing_i = control.decide(control.insert, {"vacancy": vacancy})

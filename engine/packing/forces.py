@@ -77,6 +77,46 @@ def proximity(x, h, neighbours, movable, count_radius):
     return overlap, count
 
 
+@numba.njit(parallel=True, cache=True)
+def deletions(x, h, neighbours, movable, candidate, priority):
+    """Candidates to delete: those with no closer-than-r0 candidate neighbour of higher priority.
+
+    So of two overlapping candidates only the one with the higher priority goes in a round.
+    """
+    out = np.zeros(movable, dtype=np.bool_)
+    for i in numba.prange(movable):
+        if not candidate[i]:
+            continue
+        keep_me = False
+        for k in range(neighbours.shape[1]):
+            j = neighbours[i, k]
+            if j < 0:
+                break
+            if j >= movable or not candidate[j] or priority[j] <= priority[i]:
+                continue
+            dx = x[i, 0] - x[j, 0]
+            dy = x[i, 1] - x[j, 1]
+            dz = x[i, 2] - x[j, 2]
+            if np.sqrt(dx * dx + dy * dy + dz * dz) < 0.5 * (h[i] + h[j]):
+                keep_me = True
+                break
+        out[i] = not keep_me
+    return out
+
+
+def morton_order(x: np.ndarray, bits: int = 10) -> np.ndarray:
+    """A permutation that puts spatially close points close in memory (Z-order curve)."""
+    if len(x) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    cells = ((x - lo) / np.maximum(hi - lo, 1e-300) * (2 ** bits - 1)).astype(np.uint64)
+    key = np.zeros(len(x), dtype=np.uint64)
+    for bit in range(bits):
+        for axis in range(3):
+            key |= ((cells[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(key, kind="stable")
+
+
 def neighbour_lists(x: np.ndarray, movable: int, k: int) -> np.ndarray:
     """The k nearest other bubbles of each movable bubble, as an (movable, k) int array."""
     k = min(k, len(x) - 1)
