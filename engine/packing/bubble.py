@@ -24,7 +24,7 @@ from scipy.spatial import cKDTree
 from ..sizing import NODES_PER_H3, estimate_counts
 from . import CORNER, CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
-from .forces import deletions, forces, morton_order, neighbour_lists, proximity
+from .forces import deletions, forces, morton_order, neighbour_lists, proximity, update_neighbours
 from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
 
 log = logging.getLogger(__name__)
@@ -35,10 +35,10 @@ DAMPING_RATIO = 0.7              # of critical damping 2 sqrt(m k0)
 TIME_STEP = 0.25                 # in units of sqrt(m / k0); RK4 is stable well beyond the stiffest pair
 MAX_STEPS = {CURVE: 150, PATCH: 150, VOLUME: 150}
 TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
-NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 24}
+NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 20}
 SKIN = 0.3                       # a bubble that moved this x h since the last build is stale
-STALE_SHARE = 1e-3               # rebuild the neighbour lists once this share of bubbles is stale
-REBUILD_EVERY = 40               # ... or after this many steps
+STALE_SHARE = 1e-2               # rebuild the neighbour lists once this share of bubbles is stale
+REBUILD_EVERY = 50               # ... or after this many steps
 INSIDE_CHECK_EVERY = 5           # volume bubbles outside the solid go back to their last checked place
 
 
@@ -197,10 +197,15 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
             checked = state.x.copy()
         changed = False
         if step % interval == 0 and step // interval <= rounds:
-            changed = _control(state, constraint, geometry, sizing, control, rng, events, counters, step,
-                               neighbours)
+            keep = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours)
+            changed = keep is not None
             if changed:
-                neighbours, frame = None, None
+                everything = np.concatenate([state.x, state.frozen])
+                neighbours = update_neighbours(neighbours, keep, everything, len(state.x), k)
+                fresh = len(state.x) - int(keep.sum())
+                anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh:]])
+                h = sizing(everything)
+                frame = None
                 checked = state.x.copy()
         if not changed and step > interval * rounds and moved.max() < TOLERANCE:
             break
@@ -210,8 +215,9 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     return step
 
 
-def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours) -> bool:
-    """One round of fuzzy population control; True if bubbles were deleted or inserted."""
+def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours):
+    """One round of fuzzy population control: the survivor mask of the old bubbles (new ones are
+    appended after the survivors), or None if nothing changed."""
     n = len(state.x)
     everything = np.concatenate([state.x, state.frozen])
     h = sizing(everything)
@@ -240,13 +246,13 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
         events.append(Event(int(new_id), level_name, step, "insert", control.insert.rules[rule_i[idx]].id,
                             float(firing_i[idx])))
     if not delete.any() and not len(new_x):
-        return False
+        return None
     keep = ~delete
     state.x = np.concatenate([state.x[keep], new_x])
     state.v = np.concatenate([state.v[keep], np.zeros_like(new_x)])
     state.entity = np.concatenate([state.entity[keep], state.entity[sources]])
     state.ids = np.concatenate([state.ids[keep], new_ids])
-    return True
+    return keep
 
 
 def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng):

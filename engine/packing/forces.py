@@ -23,7 +23,7 @@ def shimada(w):
 
 @numba.njit(parallel=True, cache=True)
 def forces(x, h, neighbours, movable):
-    """Net force on the first ``movable`` bubbles from their listed neighbours (-1 ends a row)."""
+    """Net force on the first ``movable`` bubbles from their listed neighbours (-1 entries are empty)."""
     out = np.zeros((movable, 3))
     for i in numba.prange(movable):
         fx = 0.0
@@ -32,7 +32,7 @@ def forces(x, h, neighbours, movable):
         for k in range(neighbours.shape[1]):
             j = neighbours[i, k]
             if j < 0:
-                break
+                continue
             dx = x[i, 0] - x[j, 0]
             dy = x[i, 1] - x[j, 1]
             dz = x[i, 2] - x[j, 2]
@@ -61,7 +61,7 @@ def proximity(x, h, neighbours, movable, count_radius):
         for k in range(neighbours.shape[1]):
             j = neighbours[i, k]
             if j < 0:
-                break
+                continue
             dx = x[i, 0] - x[j, 0]
             dy = x[i, 1] - x[j, 1]
             dz = x[i, 2] - x[j, 2]
@@ -91,7 +91,7 @@ def deletions(x, h, neighbours, movable, candidate, priority):
         for k in range(neighbours.shape[1]):
             j = neighbours[i, k]
             if j < 0:
-                break
+                continue
             if j >= movable or not candidate[j] or priority[j] <= priority[i]:
                 continue
             dx = x[i, 0] - x[j, 0]
@@ -102,6 +102,63 @@ def deletions(x, h, neighbours, movable, candidate, priority):
                 break
         out[i] = not keep_me
     return out
+
+
+@numba.njit(cache=True)
+def adopt(neighbours, x, first_new, movable):
+    """Enter each new bubble (rows first_new..movable) into the lists of the movable bubbles it lists,
+    in an empty slot or in place of a farther neighbour, so forces stay mutual between rebuilds."""
+    for b in range(first_new, movable):
+        for k in range(neighbours.shape[1]):
+            j = neighbours[b, k]
+            if j < 0 or j >= movable or j == b:
+                continue
+            d = (x[j, 0] - x[b, 0]) ** 2 + (x[j, 1] - x[b, 1]) ** 2 + (x[j, 2] - x[b, 2]) ** 2
+            worst, worst_d = -1, -1.0
+            for m in range(neighbours.shape[1]):
+                o = neighbours[j, m]
+                if o == b:
+                    worst = -2
+                    break
+                if o < 0:
+                    worst, worst_d = m, np.inf
+                    continue
+                e = (x[j, 0] - x[o, 0]) ** 2 + (x[j, 1] - x[o, 1]) ** 2 + (x[j, 2] - x[o, 2]) ** 2
+                if e > worst_d:
+                    worst, worst_d = m, e
+            if worst >= 0 and d < worst_d:
+                neighbours[j, worst] = b
+
+
+def update_neighbours(neighbours: np.ndarray, keep: np.ndarray, everything: np.ndarray, movable: int,
+                      k: int) -> np.ndarray:
+    """Neighbour lists after a population change, without a full rebuild.
+
+    ``keep`` marks the surviving old movable bubbles (their lists are renumbered,
+    deleted entries emptied); the bubbles after them up to ``movable`` are new and
+    get their own k nearest, then enter their neighbours' lists (:func:`adopt`).
+    """
+    old = len(keep)
+    survivors = int(keep.sum())
+    frozen = len(everything) - movable
+    remap = np.full(old + frozen, -1, dtype=np.int64)
+    remap[:old][keep] = np.arange(survivors)
+    remap[old:] = movable + np.arange(frozen)
+    rows = neighbours[keep]
+    rows = np.where(rows >= 0, remap[np.maximum(rows, 0)], -1)
+    fresh = movable - survivors
+    if fresh:
+        kk = min(k, len(everything) - 1, rows.shape[1])
+        _, idx = cKDTree(everything).query(everything[survivors:movable], k=kk + 1, workers=-1)
+        idx = idx.astype(np.int64)
+        own = idx == np.arange(survivors, movable)[:, None]
+        keep_cols = ~own
+        keep_cols[own.sum(axis=1) == 0, -1] = False
+        new_rows = np.full((fresh, rows.shape[1]), -1, dtype=np.int64)
+        new_rows[:, :kk] = idx[keep_cols].reshape(fresh, kk)
+        rows = np.concatenate([rows, new_rows])
+        adopt(rows, everything, survivors, movable)
+    return np.ascontiguousarray(rows)
 
 
 def morton_order(x: np.ndarray, bits: int = 10) -> np.ndarray:
