@@ -7,9 +7,9 @@ packers register through the ``fuzzymesh.packers`` entry-point group.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
-
 import numpy as np
+
+from ..registry import Registry
 
 LEVELS = ("corner", "curve", "patch", "volume")
 CORNER, CURVE, PATCH, VOLUME = range(4)
@@ -42,27 +42,7 @@ class Packing:
                        [e for p in parts for e in p.events])
 
 
-PACKERS: dict = {}
-
-
-def register_packer(name: str):
-    def decorate(function):
-        PACKERS[name] = function
-        return function
-    return decorate
-
-
-def get_packer(name: str):
-    _load_plugins()
-    return PACKERS[name]
-
-
-def packer_names() -> list[str]:
-    _load_plugins()
-    return sorted(PACKERS)
-
-
-def _load_plugins() -> None:
-    from . import bubble, lattice  # noqa: F401  (registers the built-in packers)
-    for ep in entry_points(group="fuzzymesh.packers"):
-        PACKERS.setdefault(ep.name, ep.load())
+PACKERS = Registry("fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice"])
+register_packer = PACKERS.register
+get_packer = PACKERS.get
+packer_names = PACKERS.names

@@ -21,6 +21,15 @@ def shimada(w):
     return 1.25 * w * w * w - 2.375 * w * w + 1.125
 
 
+@numba.njit(cache=True, inline="always")
+def separation(x, i, j):
+    """Vector from bubble j to bubble i, and its length."""
+    dx = x[i, 0] - x[j, 0]
+    dy = x[i, 1] - x[j, 1]
+    dz = x[i, 2] - x[j, 2]
+    return dx, dy, dz, np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
 @numba.njit(parallel=True, cache=True)
 def forces(x, h, neighbours, movable):
     """Net force on the first ``movable`` bubbles from their listed neighbours (-1 entries are empty)."""
@@ -33,10 +42,7 @@ def forces(x, h, neighbours, movable):
             j = neighbours[i, k]
             if j < 0:
                 continue
-            dx = x[i, 0] - x[j, 0]
-            dy = x[i, 1] - x[j, 1]
-            dz = x[i, 2] - x[j, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            dx, dy, dz, length = separation(x, i, j)
             r0 = 0.5 * (h[i] + h[j])
             w = length / r0
             if w < CUTOFF and length > 0.0:
@@ -62,10 +68,7 @@ def proximity(x, h, neighbours, movable, count_radius):
             j = neighbours[i, k]
             if j < 0:
                 continue
-            dx = x[i, 0] - x[j, 0]
-            dy = x[i, 1] - x[j, 1]
-            dz = x[i, 2] - x[j, 2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            length = separation(x, i, j)[3]
             r0 = 0.5 * (h[i] + h[j])
             if length < count_radius * r0:
                 c += 1
@@ -94,10 +97,7 @@ def deletions(x, h, neighbours, movable, candidate, priority):
                 continue
             if j >= movable or not candidate[j] or priority[j] <= priority[i]:
                 continue
-            dx = x[i, 0] - x[j, 0]
-            dy = x[i, 1] - x[j, 1]
-            dz = x[i, 2] - x[j, 2]
-            if np.sqrt(dx * dx + dy * dy + dz * dz) < 0.5 * (h[i] + h[j]):
+            if separation(x, i, j)[3] < 0.5 * (h[i] + h[j]):
                 keep_me = True
                 break
         out[i] = not keep_me
