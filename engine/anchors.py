@@ -37,9 +37,6 @@ class SampledDistance:
             distance[near], _ = self.tree.query(points[near], distance_upper_bound=bound, workers=WORKERS)
         return distance
 
-    def gap_to(self, other: "SampledDistance") -> float:
-        return float(other(self.samples).min())
-
 
 class FeatureDistance:
     """Exact distance to segments (a curve) or triangles (a patch), plus samples of the feature."""
@@ -151,11 +148,6 @@ class RegionDistance:
         along = np.maximum(np.maximum(-t, t - length), 0.0)
         return np.hypot(np.maximum(radial - v["radius"], 0.0), along)
 
-    def size(self) -> float:
-        v = self.values
-        if self.kind == "box":
-            return float(np.linalg.norm(v["max"] - v["min"]))
-        return float(2 * v["radius"])
 
 
 class DomainDistance:

@@ -112,16 +112,6 @@ class Features:
     feature_angle: float
     lengths: dict = field(default_factory=dict)   # characteristic lengths given by a shape
 
-    def of_kind(self, kind: str) -> list:
-        return [f for group in (self.curves, self.patches) for f in group if kind in f.kinds]
-
-    def by_id(self, feature_id: str):
-        for group in (self.corners, self.curves, self.patches):
-            for item in group:
-                if item.id == feature_id:
-                    return item
-        raise KeyError(feature_id)
-
     def named(self, name: str) -> list:
         """All features carrying ``name``."""
         return [f for group in (self.corners, self.curves, self.patches) for f in group if name in f.names]

@@ -8,7 +8,7 @@ and what is allowed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from .errors import FuzzymeshError
@@ -75,7 +75,6 @@ class Field:
     items: "Field | None" = None
     open_keys: bool = False
     doc: str = ""
-    extra: dict = field(default_factory=dict)
 
 
 def positive(value) -> str | None:

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..sizing import NODES_PER_H3, estimate_counts
-from . import CORNER, CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
+from . import CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
 from .forces import deletions, forces, morton_order, neighbour_lists, proximity, update_neighbours
 from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
@@ -157,7 +157,7 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     k = NEIGHBOURS[state.level]
     state.frozen = state.frozen[morton_order(state.frozen)]   # neighbours close in memory: fewer cache misses
     step, built = 0, 0
-    neighbours, anchor = None, None
+    neighbours, anchor, h = None, None, None   # set at the first step's rebuild
     checked = state.x.copy()
     frame = None
     for step in range(1, MAX_STEPS[state.level] + 1):
