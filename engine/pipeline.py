@@ -15,6 +15,7 @@ from .job import Job
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
+from .quality import tet_quality
 from .shapes import build_shape
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .sizing import SizingField, bind, check_element_limit
@@ -34,6 +35,7 @@ class Result:
     packing: Packing
     mesh: TetMesh
     timings: dict = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)
     files: list[Path] = field(default_factory=list)
 
 
@@ -120,7 +122,14 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%) (%.2f s)", job.mesher,
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
              100 * (mesh.volume / geometry.volume - 1), timings["meshing"])
-    result = Result(job, geometry, features, sizing, packing, mesh, timings)
+    with stage("quality", timings):
+        quality = tet_quality(mesh.points, mesh.tets).summary()
+    below = quality["below"]
+    log.info("quality: min dihedral %.2f deg (1st percentile %.2f), %d below 10 deg, %d below 5 deg; "
+             "radius ratio min %.3f, %d below 0.1 (%.2f s)", quality["min_dihedral"]["min"],
+             quality["min_dihedral"]["p01"], below["min_dihedral_10"], below["min_dihedral_5"],
+             quality["radius_ratio"]["min"], below["radius_ratio_0.1"], timings["quality"])
+    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality)
     if write:
         with stage("output", timings):
             result.files = write_mesh(mesh, job.output_dir, job.output_name, job.output_formats)

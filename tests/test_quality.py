@@ -1,0 +1,61 @@
+"""Tetrahedron quality metrics on tetrahedra whose values are known."""
+import math
+import time
+
+import numpy as np
+import pytest
+
+from engine.quality import tet_quality
+
+REGULAR = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
+
+
+def test_regular_tetrahedron_scores_one_everywhere():
+    q = tet_quality(REGULAR, np.array([[0, 2, 1, 3]]))
+    assert q.volume[0] == pytest.approx(8 / 3)
+    assert q.radius_ratio[0] == pytest.approx(1.0)
+    assert q.mean_ratio[0] == pytest.approx(1.0)
+    assert q.aspect_ratio[0] == pytest.approx(1.0)
+    dihedral = math.degrees(math.acos(1 / 3))
+    assert q.min_dihedral[0] == pytest.approx(dihedral) and q.max_dihedral[0] == pytest.approx(dihedral)
+
+
+def test_right_corner_tetrahedron():
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    q = tet_quality(points, np.array([[0, 1, 2, 3]]))
+    assert q.volume[0] == pytest.approx(1 / 6)
+    assert q.min_dihedral[0] == pytest.approx(54.7356, abs=1e-3)   # at the slanted face's edges
+    assert q.max_dihedral[0] == pytest.approx(90.0)
+    inradius = 1 / (3 + math.sqrt(3))
+    circumradius = math.sqrt(3) / 2
+    assert q.radius_ratio[0] == pytest.approx(3 * inradius / circumradius)
+
+
+def test_sliver_and_orientation():
+    sliver = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1e-3]], dtype=float)
+    q = tet_quality(sliver, np.array([[0, 1, 2, 3], [1, 0, 2, 3]]))
+    assert q.volume[0] == -q.volume[1]
+    assert (q.radius_ratio < 0.01).all() and (q.min_dihedral < 1).all() and (q.max_dihedral > 179).all()
+    summary = tet_quality(sliver, np.array([[0, 1, 2, 3]])).summary()
+    assert summary["below"]["min_dihedral_5"] == 1 and summary["below"]["radius_ratio_0.1"] == 1
+
+
+def test_scale_and_rotation_invariance():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(4, 3))
+    rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    a = tet_quality(points, np.array([[0, 1, 2, 3]]))
+    b = tet_quality(7.5 * points @ rotation.T + 3.0, np.array([[0, 1, 2, 3]]))
+    for name in ("radius_ratio", "mean_ratio", "min_dihedral", "max_dihedral", "aspect_ratio"):
+        assert getattr(a, name)[0] == pytest.approx(getattr(b, name)[0], rel=1e-9)
+
+
+def test_million_tetrahedra_speed_figure():
+    """Not a timed test: prints the time for 1M tetrahedra (target <= 1 s on the reference machine)."""
+    rng = np.random.default_rng(1)
+    points = rng.random((200_000, 3))
+    tets = rng.integers(0, len(points), size=(1_000_000, 4))
+    start = time.perf_counter()
+    q = tet_quality(points, tets)
+    print(f"quality of 1,000,000 tetrahedra: {time.perf_counter() - start:.2f} s")
+    assert np.isfinite(q.min_dihedral).all()
