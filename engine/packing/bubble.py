@@ -33,7 +33,7 @@ MASS = 1.0
 STIFFNESS = 1.0                  # k0, per unit of r0
 DAMPING_RATIO = 0.7              # of critical damping 2 sqrt(m k0)
 TIME_STEP = 0.25                 # in units of sqrt(m / k0); RK4 is stable well beyond the stiffest pair
-MAX_STEPS = {CURVE: 150, PATCH: 150, VOLUME: 150}
+MAX_STEPS = {CURVE: 130, PATCH: 130, VOLUME: 130}
 TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
 NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 20}
 SKIN = 0.3                       # a bubble that moved this x h since the last build is stale
@@ -206,7 +206,8 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
                 anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh:]])
                 h = sizing(everything)
                 frame = None
-                checked = state.x.copy()
+                # survivors keep their last verified place; new bubbles were placed inside
+                checked = np.concatenate([checked[keep], state.x[len(state.x) - fresh:]])
         if not changed and step > interval * rounds and moved.max() < TOLERANCE:
             break
     if state.level == VOLUME:
