@@ -7,17 +7,17 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .errors import JobError, LimitError
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
 from .io import write_mesh
-from .errors import JobError, LimitError
 from .job import Job
+from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
 from .quality import tet_quality
 from .shapes import build_shape
-from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .sizing import SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
@@ -31,7 +31,7 @@ class Result:
     job: Job
     geometry: Geometry
     features: Features
-    sizing: object
+    sizing: SizingField
     packing: Packing
     mesh: TetMesh
     timings: dict = field(default_factory=dict)
@@ -51,9 +51,9 @@ def build_geometry(job: Job):
     if job.shape is not None:
         try:
             shape = build_shape(job.shape, job.shape_parameters)
-        except JobError as error:
-            error.where = error.where or job.where("geometry", "parameters")
-            raise JobError(error.what, where=error.where, fix=error.fix) from None
+        except JobError as error:   # a shape's consistency check: locate it in the job file
+            raise JobError(error.what, where=error.where or job.where("geometry", "parameters"),
+                           fix=error.fix) from None
         features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
         features.lengths = dict(shape.lengths)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
