@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 from ._numba import numba
 import numpy as np
+import trimesh
 from scipy import ndimage
 
 from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_distance, patch_distance
@@ -458,8 +459,6 @@ def estimate_counts(geometry, sizing, features=None, samples: int = 400_000, see
     plates, a cylinder and an L-bracket (within 6 %): bubbles pack the volume at
     about 0.94 / h^3, and the surface layer adds 0.30 / h^2.
     """
-    import trimesh
-
     rng = np.random.default_rng(seed)
     lo, hi = geometry.bounds
     points = rng.uniform(lo, hi, size=(samples, 3))

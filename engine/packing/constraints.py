@@ -21,6 +21,18 @@ class _EntityProjection:
             self.vertices[key] = np.ascontiguousarray(vertices_by_entity[key][used], dtype=np.float64)
             self.simplices[key] = np.ascontiguousarray(local.reshape(simplices.shape), dtype=np.int64)
 
+    def frame(self, x, entity):
+        """Projected positions, and the per-simplex attribute (tangent or normal) where they land."""
+        closest, simplex = self.closest(x, entity)
+        attribute = np.empty_like(x)
+        for key in np.unique(entity):
+            rows = np.flatnonzero(entity == key)
+            attribute[rows] = self.attribute[key][simplex[rows]]
+        return closest, attribute
+
+    def project(self, x, entity):
+        return self.frame(x, entity)[0]
+
     def _tree(self, key):
         if key not in self.trees:   # built once per entity, reused at every step
             tree = igl.AABB()
@@ -48,22 +60,10 @@ class CurveConstraint(_EntityProjection):
         lines = {i: c.polyline for i, c in enumerate(features.curves) if c.on_surface}
         segments = {i: np.column_stack([np.arange(len(p) - 1), np.arange(1, len(p))]) for i, p in lines.items()}
         super().__init__(lines, segments)
-        self.direction = {}
+        self.attribute = {}   # unit tangent of each segment
         for i, line in lines.items():
             d = np.diff(line, axis=0)
-            self.direction[i] = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-
-    def frame(self, x, entity):
-        """Projected positions and unit tangents there."""
-        closest, simplex = self.closest(x, entity)
-        tangent = np.empty_like(x)
-        for key in np.unique(entity):
-            rows = np.flatnonzero(entity == key)
-            tangent[rows] = self.direction[key][simplex[rows]]
-        return closest, tangent
-
-    def project(self, x, entity):
-        return self.frame(x, entity)[0]
+            self.attribute[i] = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
 
     @staticmethod
     def tangential(vectors, tangent):
@@ -77,19 +77,7 @@ class PatchConstraint(_EntityProjection):
         mesh = geometry.mesh
         faces = {i: mesh.faces[p.faces] for i, p in enumerate(features.patches)}
         super().__init__({i: mesh.vertices for i in faces}, faces)
-        self.face_normals = {i: mesh.face_normals[p.faces] for i, p in enumerate(features.patches)}
-
-    def frame(self, x, entity):
-        """Projected positions and unit normals there."""
-        closest, simplex = self.closest(x, entity)
-        normal = np.empty_like(x)
-        for key in np.unique(entity):
-            rows = np.flatnonzero(entity == key)
-            normal[rows] = self.face_normals[key][simplex[rows]]
-        return closest, normal
-
-    def project(self, x, entity):
-        return self.frame(x, entity)[0]
+        self.attribute = {i: mesh.face_normals[p.faces] for i, p in enumerate(features.patches)}   # unit normals
 
     @staticmethod
     def tangential(vectors, normal):
