@@ -5,15 +5,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+NODE_LEVELS = ("corner", "curve", "patch", "volume", "steiner")   # the packing's levels, then mesher-added nodes
+STEINER = 4
+
+
 @dataclass
 class TetMesh:
-    """Linear tetrahedra with node tags (level and entity, as in the Packing)."""
+    """Linear tetrahedra with node tags and, where the mesher conforms to the surface, tagged boundary faces.
+
+    ``node_level`` indexes NODE_LEVELS; ``node_entity`` is the corner / curve /
+    patch index in the Features (-1 in the volume and for Steiner nodes).
+    ``boundary`` triangles are outward and each lies on surface patch
+    ``boundary_patch``; both are empty for a mesher that does not conform.
+    """
 
     points: np.ndarray         # (n, 3)
     tets: np.ndarray           # (m, 4) int64, positively oriented
     node_level: np.ndarray     # (n,) int8
     node_entity: np.ndarray    # (n,) int64
     stats: dict = field(default_factory=dict)
+    boundary: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    boundary_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def volumes(self) -> np.ndarray:
         p = self.points[self.tets]
@@ -22,3 +34,9 @@ class TetMesh:
     @property
     def volume(self) -> float:
         return float(self.volumes().sum())
+
+    def boundary_faces(self) -> np.ndarray:
+        """The faces used by one tetrahedron only, outward: the mesh's actual boundary."""
+        faces = self.tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3)
+        _, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
+        return faces[np.sort(index[counts == 1])]

@@ -95,6 +95,14 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
 
 
+def describe_mesher_stats(stats: dict) -> str:
+    """The mesher's counts and stage times as ``; key value, ...`` for the log."""
+    items = [f"{key.replace('_', ' ')} {value:.3g}" if isinstance(value, float) else f"{key.replace('_', ' ')} {value}"
+             for key, value in stats.items() if not isinstance(value, dict)]
+    items += [f"{key} {value:.2f} s" for key, value in stats.get("seconds", {}).items()]
+    return "; " + ", ".join(items) if items else ""
+
+
 def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True) -> Result:
     """Mesh the job's solid; write the outputs when ``write``. Errors are FuzzymeshErrors."""
     timings: dict = {}
@@ -118,10 +126,10 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
         packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed, knowledge=kb)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
     with stage("meshing", timings):
-        mesh = get_mesher(job.mesher)(packing, geometry, features)
-    log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%) (%.2f s)", job.mesher,
+        mesh = get_mesher(job.mesher)(packing, geometry, features, seed=job.seed)
+    log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)", job.mesher,
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
-             100 * (mesh.volume / geometry.volume - 1), timings["meshing"])
+             100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])
     with stage("quality", timings):
         quality = tet_quality(mesh.points, mesh.tets).summary()
     below = quality["below"]

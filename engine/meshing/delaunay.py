@@ -1,77 +1,87 @@
-"""The ``delaunay`` mesher: Delaunay of all nodes, then the IN/OUT check.
+"""The ``delaunay`` mesher (default): boundary-conforming Delaunay of the bubbles, then quality improvement.
 
-All nodes are tetrahedralized with Gmsh's Delaunay kernel
-(``gmsh.algorithm.tetrahedralize``); tetrahedra whose centroid lies outside
-the solid, and flat ones, are dropped (the paper's method).
+1. The surface nodes are triangulated patch by patch (``surface.py``): a
+   closed, outward triangulation whose nodes are bubbles on the surface and
+   whose edges include every feature curve.
+2. All nodes are tetrahedralized by Gmsh's constrained Delaunay kernel (HXT)
+   with those triangles as constrained faces; Steiner points it adds are
+   kept, tagged ``steiner``, and counted.
+3. IN/OUT: regions of tets between the boundary triangles are classified by
+   the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``).
+4. Quality improvement (``improve.py``); boundary nodes never move.
 """
 from __future__ import annotations
 
+import logging
+import time
+
 import numpy as np
 
-from ..mesh import TetMesh
+from ..mesh import STEINER, TetMesh
+from ..packing import PATCH, VOLUME
 from . import register_mesher
+from .improve import gmsh_optimize, min_dihedrals, relocate
+from .surface import triangulate_boundary
+from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
-FLAT_VOLUME = 1e-9  # tets with volume below this fraction of h^3 are flat (degenerate)
-
-
-def tetrahedralize(points: np.ndarray) -> np.ndarray:
-    """Delaunay tetrahedra (m, 4), 0-based, of ``points`` by Gmsh's kernel."""
-    import gmsh
-
-    if not gmsh.isInitialized():
-        gmsh.initialize(readConfigFiles=False)
-        gmsh.option.setNumber("General.Terminal", 0)
-    tets, steiner = gmsh.algorithm.tetrahedralize(np.ascontiguousarray(points, dtype=float).ravel())
-    if len(steiner):
-        raise RuntimeError("unconstrained Delaunay added Steiner points")
-    return np.asarray(tets, dtype=np.int64).reshape(-1, 4) - 1
-
-
-def orient(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Tets made positive by swapping two nodes where needed, and their volumes."""
-    p = points[tets]
-    vol = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
-    tets = tets.copy()
-    negative = vol < 0
-    tets[negative] = tets[negative][:, [1, 0, 2, 3]]
-    return tets, np.abs(vol)
-
-
-def canonical(tets: np.ndarray) -> np.ndarray:
-    """The same tets in a unique order: nodes sorted up to an even permutation, rows sorted.
-
-    Gmsh's kernel returns the tetrahedra in a run-dependent order; this makes
-    the mesh depend on the nodes only (orientation is kept).
-    """
-    order = np.argsort(tets, axis=1)
-    rows = np.take_along_axis(tets, order, axis=1)
-    # parity of the sorting permutation: count inversions among the 4 positions
-    inversions = sum((order[:, i] > order[:, j]).astype(int) for i in range(4) for j in range(i + 1, 4))
-    odd = inversions % 2 == 1
-    rows[odd] = rows[odd][:, [0, 1, 3, 2]]
-    return rows[np.lexsort(rows.T[::-1])]
-
-
-def compact(points, tets, *node_arrays):
-    """Drop nodes no tetrahedron uses; renumber."""
-    used = np.zeros(len(points), bool)
-    used[tets.ravel()] = True
-    new_index = np.cumsum(used) - 1
-    return (points[used], new_index[tets], *[a[used] for a in node_arrays])
+log = logging.getLogger(__name__)
 
 
 @register_mesher("delaunay")
-def mesh_delaunay(packing, geometry, features) -> TetMesh:
-    points = packing.points
-    tets, volume = orient(points, tetrahedralize(points))
-    total = len(tets)
-    h = 2 * packing.radius[tets].mean(axis=1)
-    keep = volume > FLAT_VOLUME * h ** 3
-    centroids = points[tets[keep]].mean(axis=1)
-    keep[keep] = geometry.contains(centroids)
-    tets = tets[keep]
-    points, tets, level, entity = compact(points, tets, packing.level, packing.entity)
-    tets = canonical(tets)
-    stats = {"delaunay_tets": total, "outside_or_flat_dropped": int(total - len(tets)),
-             "unused_nodes_dropped": int(len(packing) - len(points))}
-    return TetMesh(points, tets, level, entity, stats)
+def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
+    seconds = {}
+    start = time.perf_counter()
+    surface = triangulate_boundary(packing, geometry, features)
+    keep = np.ones(len(packing), bool)
+    keep[surface.dropped] = False
+    nodes = np.flatnonzero(keep)
+    new_index = np.cumsum(keep) - 1
+    points = packing.points[nodes]
+    boundary = new_index[surface.triangles]
+    seconds["surface"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    tets, steiner = tetrahedralize(points, boundary)
+    points = np.vstack([points, steiner])
+    level = np.concatenate([packing.level[nodes], np.full(len(steiner), STEINER)]).astype(np.int8)
+    entity = np.concatenate([packing.entity[nodes], np.full(len(steiner), -1)]).astype(np.int64)
+    hull_tets = len(tets)
+    tets = tets[inside_by_boundary(points, tets, boundary)]
+    tets = canonical(orient(points, tets)[0])    # Gmsh's order varies from run to run
+    seconds["connect"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    before = _worst(points, tets)
+    fixed = (level != VOLUME) & (level != STEINER)
+    points, tets = gmsh_optimize(points, tets, fixed)
+    points, moves = relocate(points, tets, _slide_directions(level, entity, features), seed)
+    seconds["improve"] = time.perf_counter() - start
+
+    points, tets, level, entity, renumber = compact(points, tets, level, entity)
+    boundary = renumber[boundary]
+    stats = {"boundary_triangles": len(boundary), "crowded_surface_nodes_dropped": len(surface.dropped),
+             "steiner_points": len(steiner), "hull_tets": hull_tets, "outside_tets_dropped": hull_tets - len(tets),
+             "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
+             "min_dihedral_before_improvement": before, "relocated_nodes": moves,
+             "seconds": {k: round(v, 3) for k, v in seconds.items()}}
+    log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement: "
+             "min dihedral %.2f -> %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
+             len(tets), len(steiner), seconds["connect"], before, _worst(points, tets), moves, seconds["improve"])
+    order = np.argsort(surface.patch, kind="stable")
+    return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order])
+
+
+def _slide_directions(level, entity, features) -> np.ndarray:
+    """Per node: NaN (fixed: corners, curves, curved patches), 0 (free: volume), or the plane's normal."""
+    slide = np.full((len(level), 3), np.nan)
+    slide[(level == VOLUME) | (level == STEINER)] = 0.0
+    on_patch = np.flatnonzero(level == PATCH)
+    planar = np.array([p.planar for p in features.patches], dtype=bool)
+    normals = np.array([p.normal for p in features.patches]).reshape(-1, 3)
+    sliding = on_patch[planar[entity[on_patch]]]
+    slide[sliding] = normals[entity[sliding]]
+    return slide
+
+
+def _worst(points, tets) -> float:
+    return float(min_dihedrals(points, tets).min()) if len(tets) else 0.0

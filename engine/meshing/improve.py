@@ -1,0 +1,232 @@
+"""Quality improvement after connection: Gmsh's tetrahedral optimiser, then targeted node relocation.
+
+1. Gmsh's optimiser (edge and face swaps, node relocation) on the mesh loaded
+   as discrete entities: boundary nodes sit on the boundary entity and are
+   never moved; elements below ``Mesh.OptimizeThreshold`` (gamma) are worked on.
+   Measured on the 170k-bubble junction: 9,470 tets under 10 degrees become
+   18 in 2.4 s.
+2. What is left under the targets is fixed by moving the nodes of each bad
+   tetrahedron to the best of a few candidate places (star centroid,
+   deterministic perturbations), judged by the worst element quality of the
+   node's star, min(radius ratio, min dihedral / 70.53 deg) (1 for the regular
+   tetrahedron); a move is kept only if it improves it. Volume nodes move
+   freely, nodes of planar patches slide in their plane, curve and corner
+   nodes and nodes of curved patches stay.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._numba import numba
+from .tetra import gmsh_session
+
+GMSH_THRESHOLD = 0.3        # Gmsh optimises tets with gamma below this
+TARGET_DIHEDRAL = 12.0      # degrees: relocation works on tets whose minimum dihedral is below,
+TARGET_RADIUS_RATIO = 0.2   # ... or whose radius ratio is below
+REGULAR_DIHEDRAL = 70.528779365509308
+RELOCATION_PASSES = 6
+CANDIDATES = 48             # perturbation directions per node and pass
+STEPS = np.array([0.04, 0.12, 0.25])   # perturbation lengths, x the mean edge length of the star
+
+
+def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
+    """Gmsh's optimiser on the mesh; nodes with ``fixed`` set stay where they are.
+
+    Returns (points, tets): node indices are kept; Gmsh may relocate free nodes.
+    """
+    import gmsh
+
+    gmsh_session()
+    gmsh.option.setNumber("Mesh.OptimizeThreshold", GMSH_THRESHOLD)
+    previous = gmsh.model.getCurrent() if gmsh.model.list() else None
+    gmsh.model.add("fuzzymesh-optimize")
+    try:
+        surface = gmsh.model.addDiscreteEntity(2)
+        volume = gmsh.model.addDiscreteEntity(3, -1, [surface])
+        used = np.zeros(len(points), bool)
+        used[tets.ravel()] = True
+        for entity, dim, select in ((surface, 2, used & fixed), (volume, 3, used & ~fixed)):
+            nodes = np.flatnonzero(select)
+            gmsh.model.mesh.addNodes(dim, entity, (nodes + 1).tolist(), points[nodes].ravel().tolist())
+        gmsh.model.mesh.addElementsByType(volume, 4, [], (tets + 1).ravel().tolist())
+        gmsh.model.mesh.optimize("", force=True)
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        _, nodes = gmsh.model.mesh.getElementsByType(4)
+    finally:
+        gmsh.model.remove()
+        if previous:
+            gmsh.model.setCurrent(previous)
+    tags = np.asarray(tags, dtype=np.int64)
+    if tags.max() > len(points):
+        raise RuntimeError("Gmsh's optimiser added nodes")
+    points = points.copy()
+    points[tags - 1] = np.asarray(coords).reshape(-1, 3)
+    return points, np.asarray(nodes, dtype=np.int64).reshape(-1, 4) - 1
+
+
+def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int = 0) -> tuple[np.ndarray, int]:
+    """Move nodes of tets below the targets where that improves their stars.
+
+    ``slide`` (n, 3) per node: NaN for a fixed node, zeros for a free one, a
+    unit normal for a node that slides in a plane. Returns (points, number of
+    moves). Deterministic for a seed.
+    """
+    points = np.ascontiguousarray(points, dtype=np.float64).copy()
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    slide = np.ascontiguousarray(slide, dtype=np.float64)
+    order = np.argsort(tets.ravel(), kind="stable")
+    star_start = np.searchsorted(tets.ravel()[order], np.arange(len(points) + 1))
+    star_tets = (order // 4).astype(np.int64)
+    directions = np.random.default_rng(seed).normal(size=(CANDIDATES, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    movable = ~np.isnan(slide[:, 0])
+    target = min(TARGET_DIHEDRAL / REGULAR_DIHEDRAL, TARGET_RADIUS_RATIO)
+    check = np.arange(len(tets))
+    moves = 0
+    for _ in range(RELOCATION_PASSES):
+        bad = check[_below_targets(points, tets, check, target)]
+        if len(bad) == 0:
+            break
+        candidates = np.unique(tets[bad].ravel())
+        candidates = candidates[movable[candidates]]
+        moved = _relocate_nodes(points, tets, star_start, star_tets, candidates, slide, directions, STEPS)
+        moves += moved
+        if moved == 0:
+            break
+        # only the stars of the nodes just worked on can have changed
+        counts = star_start[candidates + 1] - star_start[candidates]
+        offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        check = np.unique(star_tets[np.repeat(star_start[candidates], counts) + offsets])
+    return points, moves
+
+
+def min_dihedrals(points, tets) -> np.ndarray:
+    """Minimum dihedral angle (degrees) of every tet; -1 for inverted or flat ones."""
+    return _min_dihedrals(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets, dtype=np.int64))
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _min_dihedrals(points, tets):
+    out = np.empty(len(tets))
+    for t in numba.prange(len(tets)):
+        out[t] = _min_dihedral(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
+    return out
+
+
+@numba.njit(parallel=True, cache=True, error_model="numpy")
+def _below_targets(points, tets, rows, quality):
+    """Which of the tets ``rows`` have _quality below ``quality``."""
+    out = np.empty(len(rows), dtype=np.bool_)
+    for i in numba.prange(len(rows)):
+        t = rows[i]
+        out[i] = _quality(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]) < quality
+    return out
+
+
+@numba.njit(inline="always", error_model="numpy")
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _shape(a, b, c, d):
+    """(6 x volume, the largest cosine between outward face normals' opposites, radius ratio)."""
+    ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+    vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+    wx, wy, wz = d[0] - a[0], d[1] - a[1], d[2] - a[2]
+    vw = _cross(vx, vy, vz, wx, wy, wz)
+    six_volume = ux * vw[0] + uy * vw[1] + uz * vw[2]
+    if six_volume <= 0.0:
+        return six_volume, 1.0, 0.0
+    # outward normals (area x 2) of the faces opposite a, b, c, d
+    n0 = _cross(d[0] - b[0], d[1] - b[1], d[2] - b[2], c[0] - b[0], c[1] - b[1], c[2] - b[2])
+    n1 = vw
+    n2 = _cross(wx, wy, wz, ux, uy, uz)
+    n3 = _cross(ux, uy, uz, vx, vy, vz)
+    normals = (n0, n1, n2, n3)
+    lengths = (np.sqrt(n0[0] ** 2 + n0[1] ** 2 + n0[2] ** 2), np.sqrt(n1[0] ** 2 + n1[1] ** 2 + n1[2] ** 2),
+               np.sqrt(n2[0] ** 2 + n2[1] ** 2 + n2[2] ** 2), np.sqrt(n3[0] ** 2 + n3[1] ** 2 + n3[2] ** 2))
+    largest = -1.0
+    for i in range(4):
+        for j in range(i + 1, 4):
+            cosine = -(normals[i][0] * normals[j][0] + normals[i][1] * normals[j][1]
+                       + normals[i][2] * normals[j][2]) / (lengths[i] * lengths[j])
+            largest = max(largest, cosine)
+    area2 = lengths[0] + lengths[1] + lengths[2] + lengths[3]        # twice the surface area
+    r_in = six_volume / area2
+    uu, vv, ww = ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz
+    wu = _cross(wx, wy, wz, ux, uy, uz)
+    uv = n3
+    cx = uu * vw[0] + vv * wu[0] + ww * uv[0]
+    cy = uu * vw[1] + vv * wu[1] + ww * uv[1]
+    cz = uu * vw[2] + vv * wu[2] + ww * uv[2]
+    r_circ = np.sqrt(cx * cx + cy * cy + cz * cz) / (2 * six_volume)
+    return six_volume, largest, 3 * r_in / r_circ
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _min_dihedral(a, b, c, d):
+    """Minimum dihedral angle in degrees, -1 when the tet is inverted or flat."""
+    six_volume, largest, _ = _shape(a, b, c, d)
+    if six_volume <= 0.0:
+        return -1.0
+    return np.degrees(np.arccos(min(1.0, largest)))
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _quality(a, b, c, d):
+    """min(radius ratio, min dihedral / regular dihedral): 1 for the regular tet, -1 for an inverted one."""
+    six_volume, largest, radius_ratio = _shape(a, b, c, d)
+    if six_volume <= 0.0:
+        return -1.0
+    return min(radius_ratio, np.degrees(np.arccos(min(1.0, largest))) / REGULAR_DIHEDRAL)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _star_quality(points, tets, star, node, position):
+    worst = 1.0
+    q = np.empty((4, 3))
+    for t in star:
+        for k in range(4):
+            v = tets[t, k]
+            q[k] = position if v == node else points[v]
+        worst = min(worst, _quality(q[0], q[1], q[2], q[3]))
+    return worst
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _relocate_nodes(points, tets, star_start, star_tets, nodes, slide, directions, steps):
+    moved = 0
+    for node in nodes:
+        star = star_tets[star_start[node]:star_start[node + 1]]
+        here = points[node].copy()
+        normal = slide[node]
+        best = _star_quality(points, tets, star, node, here)
+        centre = np.zeros(3)
+        count = 0
+        edge = 0.0
+        for t in star:
+            for k in range(4):
+                v = tets[t, k]
+                if v != node:
+                    centre += points[v]
+                    edge += np.sqrt(np.sum((points[v] - here) ** 2))
+                    count += 1
+        centre /= count
+        edge /= count
+        best_position = here.copy()
+        trial = centre - np.dot(centre - here, normal) * normal
+        q = _star_quality(points, tets, star, node, trial)
+        if q > best:
+            best, best_position = q, trial
+        for s in steps:
+            for k in range(len(directions)):
+                step = directions[k] - np.dot(directions[k], normal) * normal
+                trial = here + s * edge * step
+                q = _star_quality(points, tets, star, node, trial)
+                if q > best:
+                    best, best_position = q, trial
+        if np.any(best_position != here):
+            points[node] = best_position
+            moved += 1
+    return moved

@@ -1,0 +1,209 @@
+"""Tetrahedralization kernels shared by the meshers: Gmsh's Delaunay, orientation, IN/OUT, ordering."""
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import contextmanager
+
+import numpy as np
+
+from .._numba import numba
+from ..quality import FACES
+
+
+def gmsh_session() -> None:
+    """Initialise Gmsh once, quietly, with HXT as the 3-D kernel (the one that takes constraints)."""
+    import gmsh
+
+    if not gmsh.isInitialized():
+        gmsh.initialize(readConfigFiles=False)
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.Verbosity", 0)
+    gmsh.option.setNumber("Mesh.Algorithm3D", 10)
+
+
+@contextmanager
+def quiet_stdout():
+    """Silence what native code writes to the process's standard output."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def tetrahedralize(points: np.ndarray, triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Delaunay tetrahedra (m, 4), 0-based, of ``points`` by Gmsh, with ``triangles`` as constrained faces.
+
+    Returns (tets, steiner points); the tets cover the convex hull, and
+    indices at and beyond len(points) are Steiner points.
+    """
+    import gmsh
+
+    gmsh_session()
+    faces = [] if triangles is None else (np.asarray(triangles, dtype=np.int64) + 1).ravel().tolist()
+    with quiet_stdout():   # HXT prints "Info : Recover Delaunay" whatever the verbosity
+        tets, steiner = gmsh.algorithm.tetrahedralize(np.ascontiguousarray(points, dtype=float).ravel(), faces)
+    return np.asarray(tets, dtype=np.int64).reshape(-1, 4) - 1, np.asarray(steiner, dtype=float).reshape(-1, 3)
+
+
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    p = points[tets]
+    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+
+
+def orient(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tets made positive by swapping two nodes where needed, and their volumes."""
+    vol = signed_volumes(points, tets)
+    tets = tets.copy()
+    negative = vol < 0
+    tets[negative] = tets[negative][:, [1, 0, 2, 3]]
+    return tets, np.abs(vol)
+
+
+def node_stars(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR of the tets around each node: tets star[start[v]:start[v + 1]] contain node v."""
+    return _node_stars(np.ascontiguousarray(tets, dtype=np.int64), n)
+
+
+@numba.njit(cache=True)
+def _node_stars(tets, n):
+    start = np.zeros(n + 1, np.int64)
+    for v in tets.ravel():
+        start[v + 1] += 1
+    start = np.cumsum(start)
+    fill = start[:-1].copy()
+    star = np.empty(tets.size, np.int64)
+    for t in range(len(tets)):
+        for k in range(4):
+            v = tets[t, k]
+            star[fill[v]] = t
+            fill[v] += 1
+    return start, star
+
+
+def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarray) -> np.ndarray:
+    """Which tets lie inside the closed, outward-oriented ``boundary`` triangulation (faces of the tets).
+
+    The outside is flooded, through faces that are not boundary triangles,
+    from the tets in front of (on the outer side of) a boundary triangle;
+    every outside region of the hull touches the boundary, so what is not
+    reached is inside. Exact: no inside tests on the curved solid, whose
+    chords the boundary triangles are; reaching a tet that lies behind a
+    boundary triangle is an error.
+    """
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    start, star = node_stars(tets, len(points))
+    inside, conflicts = _inside_by_boundary(np.ascontiguousarray(points, dtype=np.float64), tets,
+                                            np.ascontiguousarray(boundary, dtype=np.int64), start, star, FACES)
+    if conflicts:
+        raise RuntimeError("a region of tetrahedra lies on both sides of the boundary")
+    return inside
+
+
+@numba.njit(cache=True)
+def _find_face(tets, start, star, a, b, c, skip):
+    """The tet other than ``skip`` with nodes a, b, c, and the local index of its fourth node; -1 if none."""
+    lo = min(a, min(b, c))
+    for s in star[start[lo]:start[lo + 1]]:
+        if s == skip:
+            continue
+        found, other = 0, -1
+        for j in range(4):
+            v = tets[s, j]
+            if v == a or v == b or v == c:
+                found += 1
+            else:
+                other = j
+        if found == 3:
+            return s, other
+    return -1, -1
+
+
+@numba.njit(cache=True)
+def _inside_by_boundary(points, tets, boundary, start, star, faces):
+    m = len(tets)
+    blocked = np.zeros((m, 4), np.bool_)
+    vote = np.zeros(m, np.int8)        # +1: behind a boundary triangle, -1: in front of one
+    for i in range(len(boundary)):
+        a, b, c = boundary[i, 0], boundary[i, 1], boundary[i, 2]
+        ab, ac = points[b] - points[a], points[c] - points[a]
+        normal = np.cross(ab, ac)
+        skip = -1
+        for _ in range(2):
+            t, k = _find_face(tets, start, star, a, b, c, skip)
+            if t < 0:
+                break
+            blocked[t, k] = True
+            side = np.dot(points[tets[t, k]] - points[a], normal)
+            vote[t] = 1 if side < 0 else -1
+            skip = t
+    # flood the outside from the tets in front of the boundary; every outside region touches the boundary
+    outside = np.zeros(m, np.bool_)
+    stack = np.empty(m, np.int64)
+    top = 0
+    for t in range(m):
+        if vote[t] < 0:
+            outside[t] = True
+            stack[top] = t
+            top += 1
+    conflicts = 0
+    while top:
+        top -= 1
+        t = stack[top]
+        for k in range(4):
+            if blocked[t, k]:
+                continue
+            f = faces[k]
+            s, _ = _find_face(tets, start, star, tets[t, f[0]], tets[t, f[1]], tets[t, f[2]], t)
+            if s >= 0 and not outside[s]:
+                if vote[s] > 0:
+                    conflicts += 1
+                outside[s] = True
+                stack[top] = s
+                top += 1
+    return ~outside, conflicts
+
+
+def canonical(tets: np.ndarray) -> np.ndarray:
+    """The same tets in a unique order: nodes sorted up to an even permutation, rows sorted.
+
+    Gmsh returns tetrahedra in a run-dependent order; this makes the mesh
+    depend on the nodes only (orientation is kept).
+    """
+    rows = _sorted_rows(np.ascontiguousarray(tets, dtype=np.int64))
+    if len(rows) and rows.max() < 2 ** 21:   # three nodes in one int64 key
+        order = np.lexsort((rows[:, 3], (rows[:, 0] << 42) | (rows[:, 1] << 21) | rows[:, 2]))
+    else:
+        order = np.lexsort(rows.T[::-1])
+    return rows[order]
+
+
+@numba.njit(cache=True)
+def _sorted_rows(tets):
+    """Each row's nodes in increasing order, the last two swapped where that takes an odd permutation."""
+    out = tets.copy()
+    for t in range(len(out)):
+        row = out[t]
+        odd = False
+        for i in range(1, 4):       # insertion sort, counting swaps
+            j = i
+            while j > 0 and row[j - 1] > row[j]:
+                row[j - 1], row[j] = row[j], row[j - 1]
+                odd = not odd
+                j -= 1
+        if odd:
+            row[2], row[3] = row[3], row[2]
+    return out
+
+
+def compact(points, tets, *node_arrays):
+    """Drop nodes no tetrahedron uses; renumber. Returns (points, tets, *node_arrays, new index of old)."""
+    used = np.zeros(len(points), bool)
+    used[tets.ravel()] = True
+    new_index = np.where(used, np.cumsum(used) - 1, -1)
+    return (points[used], new_index[tets], *[a[used] for a in node_arrays], new_index)
