@@ -121,3 +121,30 @@ def _metrics(points, tets, faces, edges, opposite):
         max_dihedral[t] = hi
         aspect[t] = longest / (2.0 * np.sqrt(6.0) * inradius) if inradius > 0 else np.inf
     return volume, radius_ratio, mean_ratio, min_dihedral, max_dihedral, aspect
+
+
+def surface_deviation(mesh, geometry, sizing) -> dict:
+    """How far the mesh boundary strays from the input surface, absolute and over the local size h.
+
+    ``input_to_mesh``: from the input surface (its vertices, edge midpoints and
+    face centroids) to the mesh's boundary triangles, the one-sided Hausdorff
+    distance the chords make; ``nodes_off_surface``: the largest distance of a
+    boundary node from the input surface (0 up to rounding for a conforming mesher).
+    """
+    import igl
+
+    surface = geometry.mesh
+    boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
+    samples = np.vstack([surface.vertices, surface.vertices[surface.edges_unique].mean(axis=1),
+                         surface.triangles_center])
+    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(samples, dtype=np.float64),
+                                               np.ascontiguousarray(mesh.points, dtype=np.float64),
+                                               np.ascontiguousarray(boundary, dtype=np.int64))
+    distance = np.sqrt(d2)
+    ratio = distance / sizing(samples)
+    nodes = np.unique(boundary)
+    n2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(mesh.points[nodes], dtype=np.float64),
+                                               np.ascontiguousarray(surface.vertices, dtype=np.float64),
+                                               np.ascontiguousarray(surface.faces, dtype=np.int64))
+    return {"input_to_mesh": float(distance.max()), "input_to_mesh_over_h": float(ratio.max()),
+            "nodes_off_surface": float(np.sqrt(n2.max()))}

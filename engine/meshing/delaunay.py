@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ..mesh import STEINER, TetMesh
-from ..packing import PATCH, VOLUME
+from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
 from .improve import gmsh_optimize, min_dihedrals, relocate
 from .surface import triangulate_boundary
@@ -30,8 +30,10 @@ log = logging.getLogger(__name__)
 @register_mesher("delaunay")
 def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     seconds = {}
+    packing_in = packing
     start = time.perf_counter()
     surface = triangulate_boundary(packing, geometry, features)
+    packing = surface.nodes            # with the curve nodes added where chain edges were split
     keep = np.ones(len(packing), bool)
     keep[surface.dropped] = False
     nodes = np.flatnonzero(keep)
@@ -60,6 +62,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     points, tets, level, entity, renumber = compact(points, tets, level, entity)
     boundary = renumber[boundary]
     stats = {"boundary_triangles": len(boundary), "crowded_surface_nodes_dropped": len(surface.dropped),
+             "curve_nodes_added": int((packing.level == CURVE).sum() - (packing_in.level == CURVE).sum()),
+             "patch_nodes_added": int((packing.level == PATCH).sum() - (packing_in.level == PATCH).sum()),
              "steiner_points": len(steiner), "hull_tets": hull_tets, "outside_tets_dropped": hull_tets - len(tets),
              "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
              "min_dihedral_before_improvement": before, "relocated_nodes": moves,

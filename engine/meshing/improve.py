@@ -38,6 +38,7 @@ def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
 
     gmsh_session()
     gmsh.option.setNumber("Mesh.OptimizeThreshold", GMSH_THRESHOLD)
+    gmsh.option.setNumber("Mesh.Renumber", 0)    # keep our node numbers as Gmsh's tags
     previous = gmsh.model.getCurrent() if gmsh.model.list() else None
     gmsh.model.add("fuzzymesh-optimize")
     try:

@@ -21,10 +21,15 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
-from ..packing import CORNER, CURVE, PATCH
+from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delaunay is local)
-CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is left out
+CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is left out, ...
+SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
+HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
+DEVIATION = 0.07  # ... and one whose chord strays this x h from its curved patch is too coarse:
+REFINE_ROUNDS = 3  # both get a node at their circumcentre, in up to this many rounds
+MIN_GAP = 0.5     # no node is added nearer than this x h to another
 
 
 @dataclass
@@ -34,6 +39,7 @@ class BoundaryTriangulation:
     triangles: np.ndarray   # (t, 3) int64
     patch: np.ndarray       # (t,) patch index of each triangle
     dropped: np.ndarray     # patch nodes left out because they crowd a feature curve
+    nodes: Packing          # the packing's nodes, and curve nodes added where chain edges were split
 
 
 def curve_chains(packing, features) -> dict[int, np.ndarray]:
@@ -100,47 +106,118 @@ def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
 
 
 def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
-    """Constrained Delaunay triangulation of the surface nodes, patch by patch (see the module doc)."""
-    chains = curve_chains(packing, features)
+    """Constrained Delaunay triangulation of the surface nodes, patch by patch (see the module doc).
+
+    A chain edge that a patch's Delaunay triangulation misses (other border
+    nodes inside its diametral circle, at an acute corner of the patch) is
+    split at its curve's midpoint, on both of its patches, until none is missed.
+    Holes in the packing of a patch get a node each (see ``_holes``).
+    """
     sides = curve_sides(geometry, features)
-    patch_nodes = np.flatnonzero(packing.level == PATCH)
-    triangles, patch_of, dropped = [], [], []
-    for p, patch in enumerate(features.patches):
-        edges = []
-        for index, chain in chains.items():
-            left, right = sides[index]
-            if p not in (left, right) or len(chain) < 2:
+    nodes = packing
+    for _ in range(SPLIT_ROUNDS):
+        chains = curve_chains(nodes, features)
+        triangles, patch_of, dropped, missed, added = [], [], [], [], []
+        next_node = len(nodes)
+        for p, patch in enumerate(features.patches):
+            edges = _border_edges(p, chains, sides, features)
+            patch_nodes = np.flatnonzero((nodes.level == PATCH) & (nodes.entity == p))
+            members = np.unique(np.concatenate([patch_nodes, edges.ravel()]))
+            if len(members) < 3:
                 continue
-            curve = features.curves[index]
-            pairs = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
-            if p == left:
-                edges.append(pairs)
-            if p == right:
-                edges.append(pairs[:, ::-1])
-        edges = np.concatenate(edges) if edges else np.zeros((0, 2), np.int64)
-        nodes = np.unique(np.concatenate([patch_nodes[packing.entity[patch_nodes] == p], edges.ravel()]))
-        if len(nodes) < 3:
+            tri, crowded, lost, new_points, new_radius = _triangulate_patch(
+                patch, geometry, nodes.points[members], nodes.radius[members], np.searchsorted(members, edges),
+                nodes.level[members] == PATCH)
+            index = np.concatenate([members, next_node + np.arange(len(new_points))])
+            next_node += len(new_points)
+            added.append(Packing(new_points, np.full(len(new_points), PATCH, np.int8), np.full(len(new_points), p),
+                                 new_radius))
+            triangles.append(index[tri])
+            patch_of.append(np.full(len(tri), p))
+            dropped.append(members[crowded])
+            missed.append(members[lost])
+        missed = np.unique(np.sort(np.concatenate(missed), axis=1), axis=0) if missed else np.zeros((0, 2), np.int64)
+        if len(missed) == 0:
+            nodes = Packing.concatenate([nodes, *added], nodes.stats)
+            break
+        nodes = _split_chain_edges(nodes, features, chains, missed)
+    else:
+        raise RuntimeError(f"{len(missed)} feature-curve edges still missing from the surface triangulation")
+    triangles = np.concatenate(triangles).astype(np.int64) if triangles else np.zeros((0, 3), np.int64)
+    check_closed(triangles)
+    return BoundaryTriangulation(triangles, np.concatenate(patch_of) if patch_of else np.zeros(0, np.int64),
+                                 np.concatenate(dropped).astype(np.int64) if dropped else np.zeros(0, np.int64),
+                                 nodes)
+
+
+def _border_edges(p, chains, sides, features) -> np.ndarray:
+    """The chain edges around patch ``p``, directed with the patch on their left."""
+    edges = []
+    for index, chain in chains.items():
+        left, right = sides[index]
+        if p not in (left, right) or len(chain) < 2:
             continue
-        local = np.searchsorted(nodes, edges)
-        tri, crowded = _triangulate_patch(patch, geometry, packing.points[nodes], packing.radius[nodes], local,
-                                          packing.level[nodes] == PATCH)
-        triangles.append(nodes[tri])
-        patch_of.append(np.full(len(tri), p))
-        dropped.append(nodes[crowded])
-    triangles = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
-    result = BoundaryTriangulation(triangles.astype(np.int64),
-                                   np.concatenate(patch_of) if patch_of else np.zeros(0, np.int64),
-                                   np.concatenate(dropped).astype(np.int64) if dropped else np.zeros(0, np.int64))
-    check_closed(result.triangles)
-    return result
+        pairs = np.column_stack([chain, np.roll(chain, -1)]) if features.curves[index].closed \
+            else np.column_stack([chain[:-1], chain[1:]])
+        if p == left:
+            edges.append(pairs)
+        if p == right:
+            edges.append(pairs[:, ::-1])
+    return np.concatenate(edges) if edges else np.zeros((0, 2), np.int64)
+
+
+def _split_chain_edges(nodes, features, chains, pairs):
+    """``nodes`` with a new curve node at the arc-length middle of each chain edge in ``pairs``."""
+    wanted = {tuple(pair) for pair in pairs.tolist()}
+    points, entity, radius = [], [], []
+    for index, chain in chains.items():
+        curve = features.curves[index]
+        ends = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        hit = np.array([tuple(sorted(pair)) in wanted for pair in ends.tolist()], dtype=bool)
+        if not hit.any():
+            continue
+        s = arc_parameter(curve, nodes.points[ends[hit].ravel()]).reshape(-1, 2)
+        if curve.closed:   # the edge that closes the loop runs past the start
+            s[:, 1] = np.where(s[:, 1] <= s[:, 0], s[:, 1] + curve.length, s[:, 1])
+        points.append(curve.point_at(s.mean(axis=1)))
+        entity.append(np.full(hit.sum(), index))
+        radius.append(nodes.radius[ends[hit]].mean(axis=1))
+    return Packing(np.vstack([nodes.points, *points]), np.concatenate([nodes.level, np.full(sum(map(len, entity)), CURVE)]).astype(np.int8),
+                   np.concatenate([nodes.entity, *entity]).astype(np.int64), np.concatenate([nodes.radius, *radius]))
 
 
 def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
-    """Triangles (local indices, counter-clockwise seen from outside) of one patch's nodes,
-    and the local indices of the ``droppable`` nodes left out for crowding the border."""
-    uv, copies = flatten(patch, geometry, points, radius)
-    extended = uv if copies is None else np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])
-    original = np.arange(len(uv)) if copies is None else np.concatenate([np.arange(len(uv))] + [rows for rows, _ in copies])
+    """One patch's surface triangulation, refined where the packing left a hole.
+
+    Returns (triangles over the nodes then the added points, counter-clockwise
+    seen from outside; ``droppable`` nodes left out for crowding the border;
+    constrained edges the triangulation misses; added points (k, 3) and their radii).
+    """
+    chart = PatchChart(patch, geometry)
+    uv = chart.uv(points)
+    added_uv, added_radius = np.zeros((0, 2)), np.zeros(0)
+    for round in range(REFINE_ROUNDS + 1):
+        all_uv, all_radius = np.vstack([uv, added_uv]), np.concatenate([radius, added_radius])
+        all_droppable = np.concatenate([droppable, np.ones(len(added_uv), bool)])
+        tri, crowded, lost = _triangulate_chart(chart, all_uv, all_radius, constraints, all_droppable)
+        if len(lost) or round == REFINE_ROUNDS:
+            break
+        new_uv, new_radius = _holes(chart, all_uv, all_radius, tri, constraints, crowded)
+        if len(new_uv) == 0:
+            break
+        added_uv, added_radius = np.vstack([added_uv, new_uv]), np.concatenate([added_radius, new_radius])
+    kept_added = np.setdiff1d(np.arange(len(added_uv)), crowded - len(uv))
+    renumber = np.arange(len(all_uv))   # crowded added points are forgotten rather than dropped
+    renumber[len(uv) + kept_added] = len(uv) + np.arange(len(kept_added))
+    return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv[kept_added]),
+            added_radius[kept_added])
+
+
+def _triangulate_chart(chart, uv, radius, constraints, droppable):
+    original = np.arange(len(uv))
+    copies = chart.copies(uv, radius)
+    extended = np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])
+    original = np.concatenate([original] + [rows for rows, _ in copies])
     edges = _constraint_copies(constraints, original, extended)
     crowded = np.unique(original[_crowding(extended, edges, droppable[original], 2 * radius[original])])
     if len(crowded):
@@ -148,15 +225,56 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
         edges = (np.cumsum(rows) - 1)[edges]   # constrained edges join curve nodes, which stay
         extended, original = extended[rows], original[rows]
     tri = _delaunay(extended)
-    inside = _inside_regions(tri, edges)
-    if copies is not None:   # one copy of each triangle: the one whose centroid lies in the unrolled turn
+    inside, lost = _inside_regions(tri, edges)
+    if chart.turn is not None:   # one copy of each triangle: the one whose centroid lies in the unrolled turn
         u = extended[tri, 0].mean(axis=1)
-        inside &= (u >= -np.pi * patch.cylinder.radius) & (u < np.pi * patch.cylinder.radius)
-    return original[tri[inside]], crowded
+        inside &= (u >= -chart.turn / 2) & (u < chart.turn / 2)
+    return original[tri[inside]], crowded, original[lost].reshape(-1, 2)
+
+
+def _holes(chart, uv, radius, tri, constraints, crowded):
+    """Points (uv, radius) to add where the triangulation is too coarse for the surface or the size:
+    triangles whose chord strays more than DEVIATION x h from the curved patch, or acute ones whose
+    circumradius exceeds HOLE x h (a bubble missing). The point is the circumcentre where it lies in its triangle,
+    else the centroid; one per hole, none near a node or the border."""
+    a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+    la, lb, lc = (np.linalg.norm(b - c, axis=1), np.linalg.norm(c - a, axis=1), np.linalg.norm(a - b, axis=1))
+    double_area = _cross2(b - a, c - a)
+    h = 2 * radius[tri].mean(axis=1)
+    ba, ca = b - a, c - a
+    centre = a + np.column_stack([ca[:, 1] * (ba ** 2).sum(1) - ba[:, 1] * (ca ** 2).sum(1),
+                                  ba[:, 0] * (ca ** 2).sum(1) - ca[:, 0] * (ba ** 2).sum(1)]) / (2 * double_area[:, None])
+    wb, wc = _cross2(centre - a, c - a) / double_area, _cross2(b - a, centre - a) / double_area
+    in_triangle = (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
+    point = np.where(in_triangle[:, None], centre, (a + b + c) / 3)
+    # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
+    badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
+    if chart.kind != "plane":
+        lifted = chart.lift(point)
+        corners = chart.lift(np.vstack([a, b, c])).reshape(3, -1, 3)
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
+        badness = np.fmax(badness, deviation / (DEVIATION * h))
+    big = np.flatnonzero(badness > 1)
+    if len(big) == 0:
+        return np.zeros((0, 2)), np.zeros(0)
+    big = big[np.argsort(-badness[big], kind="stable")]
+    point, spacing = point[big], h[big]
+    present = np.setdiff1d(np.arange(len(uv)), crowded)
+    keep = cKDTree(uv[present]).query(point)[0] > MIN_GAP * spacing
+    keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
+                   np.r_[2 * radius, spacing]) - len(uv)] = False
+    chosen = []
+    for i in np.flatnonzero(keep):    # one point per hole: the worst triangle's first
+        if all(np.linalg.norm(point[i] - point[j]) > MIN_GAP * spacing[i] for j in chosen):
+            chosen.append(i)
+    return point[chosen], spacing[chosen] / 2
 
 
 def _crowding(uv, edges, candidate, h) -> np.ndarray:
-    """Rows of ``candidate`` nodes nearer than CROWDING x h to a constrained edge."""
+    """Rows of ``candidate`` nodes that encroach on a constrained edge (inside its diametral circle,
+    where they would keep it out of the Delaunay triangulation) or lie within CROWDING x h of it."""
     rows = np.flatnonzero(candidate)
     if len(rows) == 0 or len(edges) == 0:
         return np.zeros(0, np.int64)
@@ -166,82 +284,122 @@ def _crowding(uv, edges, candidate, h) -> np.ndarray:
     start, span = a[near], (b - a)[near]
     x = uv[rows][:, None, :]
     t = np.clip(np.sum((x - start) * span, axis=2) / np.maximum(np.sum(span * span, axis=2), 1e-300), 0, 1)
-    distance = np.linalg.norm(start + t[..., None] * span - x, axis=2).min(axis=1)
-    return rows[distance < CROWDING * h[rows]]
+    distance = np.linalg.norm(start + t[..., None] * span - x, axis=2)
+    encroach = np.linalg.norm(start + 0.5 * span - x, axis=2) < 0.5 * np.linalg.norm(span, axis=2)
+    return rows[((distance < CROWDING * h[rows][:, None]) | encroach).any(axis=1)]
 
 
-def flatten(patch, geometry, points, radius):
-    """2-D coordinates of points on ``patch``, orientation-preserving seen from outside.
+class PatchChart:
+    """A patch flattened: ``uv(points)`` orientation-preserving seen from outside, ``lift(uv)`` back onto
+    the patch's input triangles. A plane is projected, a cylinder unrolled, any other patch mapped by a
+    least-squares conformal map of its input triangles. A full cylinder's strip is periodic (``turn``)."""
 
-    Returns (uv, copies): for a full cylinder, ``copies`` lists (rows, shift)
-    of nodes repeated one turn to the left and right of the unrolled strip.
-    """
-    mesh = geometry.mesh
-    if patch.planar:
-        e1 = np.cross(patch.normal, np.eye(3)[np.argmin(np.abs(patch.normal))])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(patch.normal, e1)
-        return (points - patch.centroid) @ np.column_stack([e1, e2]), None
-    if patch.cylinder is not None:
-        c = patch.cylinder
-        e1 = np.cross(c.axis, np.eye(3)[np.argmin(np.abs(c.axis))])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(c.axis, e1)
-        sign = -1.0 if c.concave else 1.0    # outward normal -e_r on a concave patch: mirror
+    def __init__(self, patch, geometry):
+        mesh = geometry.mesh
+        used, local = np.unique(mesh.faces[patch.faces], return_inverse=True)
+        self.vertices = np.ascontiguousarray(mesh.vertices[used], dtype=np.float64)
+        self.faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)
+        self.tree = igl.AABB()
+        self.tree.init(self.vertices, self.faces)
+        self.patch, self.turn = patch, None
+        if patch.planar:
+            e1 = np.cross(patch.normal, np.eye(3)[np.argmin(np.abs(patch.normal))])
+            e1 /= np.linalg.norm(e1)
+            self.kind, self.origin, self.frame = "plane", patch.centroid, np.column_stack([e1, np.cross(patch.normal, e1)])
+        elif patch.cylinder is not None:
+            c = patch.cylinder
+            e1 = np.cross(c.axis, np.eye(3)[np.argmin(np.abs(c.axis))])
+            e1 /= np.linalg.norm(e1)
+            self.kind, self.cylinder, self.e1, self.e2 = "cylinder", c, e1, np.cross(c.axis, e1)
+            self.sign = -1.0 if c.concave else 1.0    # outward normal -e_r on a concave patch: mirror
+            self.middle = -np.pi                      # the seam's angle
+            if c.full_turn:
+                self.turn = 2 * np.pi * c.radius
+            else:   # the largest empty sector of the patch goes to the seam
+                angles = np.sort(self._angle(self.vertices))
+                gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
+                k = int(np.argmax(gaps))
+                self.middle = angles[k] + gaps[k] / 2
+        else:
+            self.kind = "conformal"
+            self.vertex_uv = self._conformal_map(patch)
+            self.centres_uv = cKDTree(self.vertex_uv[self.faces].mean(axis=1))
 
-        def angle(x):
-            r = x - c.point
-            return np.arctan2(r @ e2, r @ e1)
+    def _angle(self, x):
+        r = x - self.cylinder.point
+        return np.arctan2(r @ self.e2, r @ self.e1)
 
-        if c.full_turn:
-            theta = angle(points)
-        else:   # turn the largest empty sector of the patch to the seam
-            vertex_angles = np.sort(angle(mesh.vertices[np.unique(mesh.faces[patch.faces])]))
-            gaps = np.diff(np.concatenate([vertex_angles, vertex_angles[:1] + 2 * np.pi]))
-            k = int(np.argmax(gaps))
-            middle = vertex_angles[k] + gaps[k] / 2
-            theta = np.angle(np.exp(1j * (angle(points) - middle - np.pi)))
-        uv = np.column_stack([sign * c.radius * theta, (points - c.point) @ c.axis])
-        if not c.full_turn:
-            return uv, None
-        span = c.radius * min(np.pi, SEAM_LAYERS * 2 * radius.max() / c.radius)
-        turn = 2 * np.pi * c.radius
-        half = np.pi * c.radius
-        copies = [(np.flatnonzero(uv[:, 0] < -half + span), np.array([turn, 0.0])),
-                  (np.flatnonzero(uv[:, 0] >= half - span), np.array([-turn, 0.0]))]
-        return uv, copies
-    return _conformal_map(patch, geometry, points), None
+    def uv(self, points: np.ndarray) -> np.ndarray:
+        if self.kind == "plane":
+            return (points - self.origin) @ self.frame
+        if self.kind == "cylinder":
+            c = self.cylinder
+            theta = np.angle(np.exp(1j * (self._angle(points) - self.middle - np.pi)))
+            return np.column_stack([self.sign * c.radius * theta, (points - c.point) @ c.axis])
+        _, face, closest = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(points, dtype=np.float64))
+        corners = self.vertices[self.faces[face]]
+        weights = igl.barycentric_coordinates(closest, *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
+        return np.einsum("ij,ijk->ik", weights, self.vertex_uv[self.faces[face]])
+
+    def lift(self, uv: np.ndarray) -> np.ndarray:
+        """Points on the patch's input triangles at ``uv`` (NaN rows where ``uv`` is off a conformal chart)."""
+        if self.kind == "plane":
+            x = self.origin + uv @ self.frame.T
+        elif self.kind == "cylinder":
+            c = self.cylinder
+            theta = uv[:, 0] / (self.sign * c.radius) + self.middle + np.pi
+            x = (c.point + c.radius * (np.cos(theta)[:, None] * self.e1 + np.sin(theta)[:, None] * self.e2)
+                 + uv[:, 1:2] * c.axis)
+        else:
+            return self._lift_conformal(uv)
+        _, _, closest = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(x))
+        return closest
+
+    def _lift_conformal(self, uv):
+        out = np.full((len(uv), 3), np.nan)
+        _, near = self.centres_uv.query(uv, k=min(16, len(self.faces)))
+        near = near.reshape(len(uv), -1)
+        for column in range(near.shape[1]):      # the first candidate face that contains the point
+            face = self.faces[near[:, column]]
+            a, b, c = (self.vertex_uv[face[:, i]] for i in range(3))
+            area = _cross2(b - a, c - a)
+            wb, wc = _cross2(uv - a, c - a) / area, _cross2(b - a, uv - a) / area
+            hit = np.isnan(out[:, 0]) & (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
+            weights = np.column_stack([1 - wb - wc, wb, wc])[hit]
+            out[hit] = np.einsum("ij,ijk->ik", weights, self.vertices[face[hit]])
+        return out
+
+    def copies(self, uv: np.ndarray, radius: np.ndarray) -> list:
+        """(rows, shift) of the nodes repeated one turn to the left and to the right of a periodic strip."""
+        if self.turn is None:
+            return []
+        half = self.turn / 2
+        span = min(half, SEAM_LAYERS * 2 * radius.max())
+        return [(np.flatnonzero(uv[:, 0] < -half + span), np.array([self.turn, 0.0])),
+                (np.flatnonzero(uv[:, 0] >= half - span), np.array([-self.turn, 0.0]))]
+
+    def _conformal_map(self, patch) -> np.ndarray:
+        loops = igl.boundary_loop_all(self.faces) if len(self.faces) else []
+        if not len(loops):
+            raise GeometryError(f"surface patch '{patch.id}' is closed and smooth and cannot be flattened",
+                                fix="split it by feature curves (lower geometry.feature_angle) or mesh a solid "
+                                    "whose smooth faces have borders")
+        loop = np.asarray(max(loops, key=len))
+        pinned = np.array([loop[0], loop[len(loop) // 2]])
+        span = np.linalg.norm(self.vertices[pinned[1]] - self.vertices[pinned[0]])
+        uv, _ = igl.lscm(self.vertices, self.faces, pinned, np.array([[0.0, 0.0], [span, 0.0]]))
+        area = _signed_areas(uv, self.faces)
+        if np.sum(area < 0) * 2 > len(area):
+            uv[:, 0] *= -1
+            area = -area
+        if np.any(area <= 0):
+            raise GeometryError(f"surface patch '{patch.id}' folds over when flattened",
+                                fix="split it by feature curves (lower geometry.feature_angle)")
+        return uv
 
 
-def _conformal_map(patch, geometry, points) -> np.ndarray:
-    """Least-squares conformal map of the patch's input triangles, carried to ``points`` barycentrically."""
-    mesh = geometry.mesh
-    used, local = np.unique(mesh.faces[patch.faces], return_inverse=True)
-    vertices = np.ascontiguousarray(mesh.vertices[used], dtype=np.float64)
-    faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)
-    loops = igl.boundary_loop_all(faces) if len(faces) else []
-    if not len(loops):
-        raise GeometryError(f"surface patch '{patch.id}' is closed and smooth and cannot be flattened",
-                            fix="split it by feature curves (lower geometry.feature_angle) or mesh a solid whose "
-                                "smooth faces have borders")
-    loop = np.asarray(max(loops, key=len))
-    pinned = np.array([loop[0], loop[len(loop) // 2]])
-    anchor = vertices[pinned]
-    span = np.linalg.norm(anchor[1] - anchor[0])
-    uv_vertices, _ = igl.lscm(vertices, faces, pinned, np.array([[0.0, 0.0], [span, 0.0]]))
-    area = _signed_areas(uv_vertices, faces)
-    if np.sum(area < 0) * 2 > len(area):
-        uv_vertices[:, 0] *= -1
-        area = -area
-    if np.any(area <= 0):
-        raise GeometryError(f"surface patch '{patch.id}' folds over when flattened",
-                            fix="split it by feature curves (lower geometry.feature_angle)")
-    tree = igl.AABB()
-    tree.init(vertices, faces)
-    _, face, closest = tree.squared_distance(vertices, faces, np.ascontiguousarray(points, dtype=np.float64))
-    corners = vertices[faces[face]]
-    weights = igl.barycentric_coordinates(closest, *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
-    return np.einsum("ij,ijk->ik", weights, uv_vertices[faces[face]])
+def _cross2(a, b):
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
 
 def _signed_areas(uv, tri) -> np.ndarray:
@@ -284,33 +442,31 @@ def _delaunay(uv) -> np.ndarray:
     return tri
 
 
-def _inside_regions(tri, constraints) -> np.ndarray:
-    """Triangles on the left of the directed constrained edges, flooded across the other edges."""
-    n = int(tri.max()) + 1 if len(tri) else 0
+def _inside_regions(tri, constraints):
+    """Triangles on the left of the directed constrained edges, flooded across the other edges,
+    and the constrained edges missing from ``tri`` (then nothing is flooded)."""
+    n = int(max(tri.max(initial=0), constraints.max(initial=0))) + 1
     half = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)   # directed edges, 3 per triangle
     owner = np.repeat(np.arange(len(tri)), 3)
     key = half[:, 0] * n + half[:, 1]
+    forward = np.isin(key, constraints[:, 0] * n + constraints[:, 1])
+    backward = np.isin(key, constraints[:, 1] * n + constraints[:, 0])
+    lost = ~np.isin(constraints[:, 0] * n + constraints[:, 1], key) & ~np.isin(constraints[:, 1] * n + constraints[:, 0], key)
+    if lost.any():
+        return np.zeros(len(tri), bool), constraints[lost]
     twin_key = half[:, 1] * n + half[:, 0]
     order = np.argsort(key)
     at = np.clip(np.searchsorted(key[order], twin_key), 0, len(key) - 1)
     has_twin = key[order][at] == twin_key
     twin_owner = np.where(has_twin, owner[order][at], -1)
-    lo, hi = np.minimum(half[:, 0], half[:, 1]), np.maximum(half[:, 0], half[:, 1])
-    cons = np.sort(constraints, axis=1)
-    constrained = np.isin(lo * n + hi, cons[:, 0] * n + cons[:, 1])
-    link = has_twin & ~constrained
+    link = has_twin & ~forward & ~backward
     graph = sparse.coo_matrix((np.ones(link.sum()), (owner[link], twin_owner[link])), shape=(len(tri),) * 2)
     count, region = csgraph.connected_components(graph, directed=False)
-    forward = np.isin(key, constraints[:, 0] * n + constraints[:, 1])
-    backward = np.isin(key, constraints[:, 1] * n + constraints[:, 0])
     votes_in = np.bincount(region[owner[forward]], minlength=count)
     votes_out = np.bincount(region[owner[backward]], minlength=count)
     if np.any((votes_in > 0) & (votes_out > 0)):
         raise RuntimeError("a patch triangulation region lies on both sides of its boundary")
-    missing = len(constraints) - int(forward.sum())
-    if missing:
-        raise RuntimeError(f"{missing} constrained boundary edges are missing from a patch triangulation")
-    return (votes_in > 0)[region]
+    return (votes_in > 0)[region], constraints[lost]
 
 
 def check_closed(triangles: np.ndarray) -> None:

@@ -10,6 +10,8 @@ import numpy as np
 from .._numba import numba
 from ..quality import FACES
 
+FLAT = 1e-10   # |6 x volume| below this x (edge length)^3: a flat tetrahedron
+
 
 def gmsh_session() -> None:
     """Initialise Gmsh once, quietly, with HXT as the 3-D kernel (the one that takes constraints)."""
@@ -140,7 +142,11 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
                 break
             blocked[t, k] = True
             side = np.dot(points[tets[t, k]] - points[a], normal)
-            vote[t] = 1 if side < 0 else -1
+            scale = np.dot(normal, normal) ** 0.75     # ~ |ab|^3: a flat tet on a flat hull votes nothing
+            if side < -FLAT * scale:
+                vote[t] = 1
+            elif side > FLAT * scale:
+                vote[t] = -1
             skip = t
     # flood the outside from the tets in front of the boundary; every outside region touches the boundary
     outside = np.zeros(m, np.bool_)
@@ -166,7 +172,13 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
                 outside[s] = True
                 stack[top] = s
                 top += 1
-    return ~outside, conflicts
+    inside = ~outside
+    for t in range(m):   # flat tets (HXT fills a flat hull face with them) are never inside
+        a, b, c, d = points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]
+        ab = b - a
+        if abs(np.dot(ab, np.cross(c - a, d - a))) <= FLAT * np.dot(ab, ab) ** 1.5:
+            inside[t] = False
+    return inside, conflicts
 
 
 def canonical(tets: np.ndarray) -> np.ndarray:
