@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import meshio
@@ -10,15 +11,113 @@ import numpy as np
 
 from .errors import FuzzymeshError
 from .mesh import TetMesh
+from .meshing.tetra import face_owners
 
-MESHIO_FORMATS = {"vtu": "vtu", "msh": "gmsh"}
+ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}   # C3D4/C3D10 face by the local index of the opposite node
 
 
-def to_meshio(mesh: TetMesh) -> meshio.Mesh:
-    return meshio.Mesh(
-        mesh.points, [("tetra", mesh.tets.astype(np.int64))],
-        point_data={"node_level": mesh.node_level.astype(np.int32),
-                    "node_entity": mesh.node_entity.astype(np.int32)})
+@dataclass
+class FEModel:
+    """What the files hold: nodes, linear or quadratic tets, the boundary and the named groups."""
+
+    points: np.ndarray
+    tets: np.ndarray              # (m, 4) or (m, 10)
+    boundary: np.ndarray          # (t, 3) or (t, 6)
+    node_level: np.ndarray        # -1 for mid-edge nodes
+    node_entity: np.ndarray
+    groups: list = field(default_factory=list)
+
+    @staticmethod
+    def build(mesh: TetMesh, groups=(), quadratic=None) -> "FEModel":
+        """``quadratic``: (points, tets10, triangle6) from engine.fe.quadratic, or None for linear."""
+        if quadratic is None:
+            return FEModel(mesh.points, mesh.tets, mesh.boundary, mesh.node_level, mesh.node_entity, list(groups))
+        points, tets10, triangles6 = quadratic
+        extra = len(points) - len(mesh.points)
+        return FEModel(points, tets10, triangles6, np.r_[mesh.node_level, np.full(extra, -1)],
+                       np.r_[mesh.node_entity, np.full(extra, -1)], list(groups))
+
+    @property
+    def quadratic(self) -> bool:
+        return self.tets.shape[1] == 10
+
+
+def to_meshio(model: FEModel) -> meshio.Mesh:
+    """The tetrahedra with node tags (for VTU and Abaqus)."""
+    return meshio.Mesh(model.points, [("tetra10" if model.quadratic else "tetra", model.tets.astype(np.int64))],
+                       point_data={"node_level": model.node_level.astype(np.int32),
+                                   "node_entity": model.node_entity.astype(np.int32)})
+
+
+def to_gmsh(model: FEModel) -> meshio.Mesh:
+    """Tets and every group's cells, tagged with its physical group (named in field_data)."""
+    q = model.quadratic
+    kinds = {3: "tetra10" if q else "tetra", 2: "triangle6" if q else "triangle", 1: "line3" if q else "line",
+             0: "vertex"}
+    cells, physical, field_data = [], [], {}
+    for tag, group in enumerate(model.groups or [], start=1):
+        data = model.tets[group.cells] if group.dim == 3 else _group_cells(model, group)
+        cells.append((kinds[group.dim], data.astype(np.int64)))
+        physical.append(np.full(len(data), tag, dtype=np.int32))
+        field_data[group.name] = np.array([tag, group.dim])
+    if not cells:
+        cells, physical = [(kinds[3], model.tets.astype(np.int64))], [np.ones(len(model.tets), np.int32)]
+    return meshio.Mesh(model.points, cells, cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
+                       field_data=field_data, point_data={"node_level": model.node_level.astype(np.int32),
+                                                          "node_entity": model.node_entity.astype(np.int32)})
+
+
+def _group_cells(model: FEModel, group) -> np.ndarray:
+    """A lower-dimensional group's cells, with mid-edge nodes for a quadratic model."""
+    if not model.quadratic or group.dim == 0:
+        return group.cells
+    if group.dim == 2:
+        rows = _match_rows(np.sort(model.boundary[:, :3], axis=1), np.sort(group.cells, axis=1))
+        return model.boundary[rows]
+    edges = np.sort(model.tets[:, [[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]]].reshape(-1, 2), axis=1)
+    middle = model.tets[:, 4:].reshape(-1)
+    rows = _match_rows(edges, np.sort(group.cells, axis=1))
+    return np.column_stack([group.cells, middle[rows]])
+
+
+def _match_rows(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Index into ``table`` of each of ``rows`` (all present)."""
+    n = int(max(table.max(initial=0), rows.max(initial=0))) + 1
+    def key(a):
+        k = np.zeros(len(a), np.int64)
+        for column in a.T:
+            k = k * n + column
+        return k
+    table_keys = key(table)
+    order = np.argsort(table_keys)
+    return order[np.searchsorted(table_keys[order], key(rows))]
+
+
+def write_abaqus(path, model: FEModel) -> None:
+    """Abaqus input: C3D4/C3D10 elements, a node set per group, the solid's element set, and an
+    element-face surface per surface group (for loads and contact)."""
+    data = to_meshio(model)
+    data.point_sets = {_abaqus_name(g.name): g.nodes for g in model.groups if g.dim < 3}
+    data.cell_sets = {_abaqus_name(g.name): [g.cells] for g in model.groups if g.dim == 3}
+    meshio.write(path, data, file_format="abaqus")
+    corner_tets = model.tets[:, :4]
+    lines = []
+    for group in (g for g in model.groups if g.dim == 2):
+        owner, opposite = face_owners(corner_tets, len(model.points), group.cells)
+        name = _abaqus_name(group.name)
+        for local, face in ABAQUS_FACE.items():
+            elements = owner[opposite == local] + 1
+            if len(elements):
+                lines.append(f"*ELSET, ELSET=_{name}_{face}, INTERNAL")
+                lines += [",".join(map(str, elements[i:i + 16])) for i in range(0, len(elements), 16)]
+        lines.append(f"*SURFACE, TYPE=ELEMENT, NAME={name}")
+        lines += [f"_{name}_{face}, {face}" for local, face in ABAQUS_FACE.items() if (opposite == local).any()]
+    with open(path, "a") as handle:
+        handle.write("\n".join(lines) + ("\n" if lines else ""))
+
+
+def _abaqus_name(name: str) -> str:
+    return name.replace("-", "_").replace(" ", "_")
 
 
 def write_all_or_nothing(targets: list[tuple[Path, object]]) -> list[Path]:
@@ -60,9 +159,9 @@ def write_all_or_nothing(targets: list[tuple[Path, object]]) -> list[Path]:
     return placed
 
 
-def write_mesh(mesh: TetMesh, directory: Path, name: str, formats: list[str]) -> list[Path]:
-    """Write ``mesh`` as ``directory/name.<format>`` for each format; return the paths."""
-    data = to_meshio(mesh)
-    return write_all_or_nothing([
-        (Path(directory) / f"{name}.{fmt}", lambda tmp, fmt=fmt: meshio.write(tmp, data, file_format=MESHIO_FORMATS[fmt]))
-        for fmt in formats])
+def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Path]:
+    """Write ``model`` as ``directory/name.<format>`` for each format; return the paths."""
+    writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model), file_format="vtu"),
+               "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
+               "inp": lambda tmp: write_abaqus(tmp, model)}
+    return write_all_or_nothing([(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats])

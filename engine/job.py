@@ -17,7 +17,7 @@ from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_r
 from .shapes import SHAPES
 from .yamlfile import Located, load_yaml, located
 
-OUTPUT_FORMATS = ("vtu", "msh")
+OUTPUT_FORMATS = ("vtu", "msh", "inp")
 
 
 def _plain_name(value):
@@ -60,6 +60,8 @@ def job_schema() -> dict:
             "name": Field(STRING, default="mesh", check=_plain_name, doc="base name of the mesh files"),
             "formats": Field(LIST, default=["vtu", "msh"], items=Field(STRING), check=_formats_ok,
                              doc=f"any of {', '.join(OUTPUT_FORMATS)}"),
+            "order": Field(INTEGER, default=1, choices=(1, 2),
+                           doc="element order: 1 (4-node tets) or 2 (10-node tets, boundary on the surface)"),
         }),
     }
 
@@ -88,6 +90,7 @@ class Job:
     output_name: str
     output_formats: list[str]
     raw: dict
+    output_order: int = 1
 
     def where(self, *keys) -> str:
         """file:line:col of a key path in the job file (as deep as it exists)."""
@@ -138,7 +141,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         placements=load_placements(data["place"], data.where("place"), "job", "job/place") if "place" in data else [],
         knowledge=[base_dir / k for k in values["knowledge"]], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
         output_dir=base_dir / output["directory"], output_name=output["name"],
-        output_formats=list(dict.fromkeys(output["formats"])), raw=data)
+        output_formats=list(dict.fromkeys(output["formats"])), raw=data, output_order=output["order"])
 
 
 def default_job() -> Job:

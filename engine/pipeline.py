@@ -7,10 +7,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .errors import JobError, LimitError
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
-from .io import write_mesh
+from .fe import Group, feature_groups, quadratic
+from .io import FEModel, write_mesh
 from .job import Job
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
@@ -95,6 +98,13 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
 
 
+def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features) -> FEModel:
+    """The mesh as the files hold it: the job's element order, with the features' named groups."""
+    quadratic_elements = quadratic(mesh, geometry, features) if job.output_order == 2 else None
+    return FEModel.build(mesh, feature_groups(mesh, features) if len(mesh.boundary) else
+                         [Group("solid", 3, np.arange(len(mesh.tets)))], quadratic_elements)
+
+
 def describe_mesher_stats(stats: dict) -> str:
     """The mesher's counts and stage times as ``; key value, ...`` for the log."""
     items = [f"{key.replace('_', ' ')} {value:.3g}" if isinstance(value, float) else f"{key.replace('_', ' ')} {value}"
@@ -140,6 +150,7 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality)
     if write:
         with stage("output", timings):
-            result.files = write_mesh(mesh, job.output_dir, job.output_name, job.output_formats)
+            result.files = write_mesh(fe_model(job, mesh, geometry, features), job.output_dir, job.output_name,
+                                      job.output_formats)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result

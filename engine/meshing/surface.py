@@ -265,10 +265,12 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     keep = cKDTree(uv[present]).query(point)[0] > MIN_GAP * spacing
     keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
                    np.r_[2 * radius, spacing]) - len(uv)] = False
-    chosen = []
-    for i in np.flatnonzero(keep):    # one point per hole: the worst triangle's first
-        if all(np.linalg.norm(point[i] - point[j]) > MIN_GAP * spacing[i] for j in chosen):
-            chosen.append(i)
+    point, spacing = point[keep], spacing[keep]
+    chosen = np.ones(len(point), bool)
+    neighbours = cKDTree(point).query_ball_point(point, MIN_GAP * spacing)
+    for i, near in enumerate(neighbours):    # one point per hole: the worst triangle's, which come first
+        if chosen[i]:
+            chosen[[j for j in near if j > i]] = False
     return point[chosen], spacing[chosen] / 2
 
 

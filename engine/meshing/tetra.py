@@ -219,3 +219,20 @@ def compact(points, tets, *node_arrays):
     used[tets.ravel()] = True
     new_index = np.where(used, np.cumsum(used) - 1, -1)
     return (points[used], new_index[tets], *[a[used] for a in node_arrays], new_index)
+
+
+def face_owners(tets: np.ndarray, n: int, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each triangle, a tet that has it as a face and that tet's local index of the opposite node
+    (-1, -1 where none has)."""
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    start, star = node_stars(tets, n)
+    return _face_owners(tets, start, star, np.ascontiguousarray(triangles, dtype=np.int64))
+
+
+@numba.njit(cache=True)
+def _face_owners(tets, start, star, triangles):
+    owner = np.full(len(triangles), -1, np.int64)
+    opposite = np.full(len(triangles), -1, np.int64)
+    for i in range(len(triangles)):
+        owner[i], opposite[i] = _find_face(tets, start, star, triangles[i, 0], triangles[i, 1], triangles[i, 2], -1)
+    return owner, opposite

@@ -1,0 +1,180 @@
+"""What an FE analyst needs beyond the elements: named groups of the model's features, and
+quadratic tetrahedra whose boundary follows the surface.
+
+Groups: ``solid`` (every tetrahedron), one per surface patch (its name, or its id such as
+``patch-3``) with its boundary triangles, one per named or unnamed feature curve with its mesh
+edges, one per named corner. They become physical groups in ``.msh`` and node sets, element sets
+and element-face surfaces in Abaqus ``.inp``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import NODE_LEVELS, TetMesh
+from .meshing.surface import arc_parameter
+
+CORNER, CURVE = NODE_LEVELS.index("corner"), NODE_LEVELS.index("curve")
+TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
+TRIANGLE6_EDGES = np.array([[0, 1], [1, 2], [2, 0]])
+CURVING_ATTEMPTS = 4   # an element that would fold gets its mid-edge nodes moved half as far, this often
+
+
+@dataclass
+class Group:
+    """A named set of mesh entities: tets (dim 3), boundary triangles (2), curve edges (1) or corner nodes (0)."""
+
+    name: str
+    dim: int
+    cells: np.ndarray    # (k,) tet indices for dim 3; (k, 3), (k, 2), (k, 1) node indices below
+
+    @property
+    def nodes(self) -> np.ndarray:
+        return np.unique(self.cells) if self.dim < 3 else np.array([], np.int64)
+
+
+def feature_groups(mesh: TetMesh, features) -> list[Group]:
+    """The solid, its patches, curves and corners as groups (see the module doc); empty names never."""
+    groups = [Group("solid", 3, np.arange(len(mesh.tets)))]
+    for p, patch in enumerate(features.patches):
+        faces = mesh.boundary[mesh.boundary_patch == p]
+        if len(faces):
+            for name in _names(patch):
+                groups.append(Group(name, 2, faces))
+    edges, curve = curve_edges(mesh, features)
+    for c, feature in enumerate(features.curves):
+        if (curve == c).any():
+            for name in _names(feature):
+                groups.append(Group(name, 1, edges[curve == c]))
+    corner_nodes = np.flatnonzero(mesh.node_level == CORNER)
+    for node in corner_nodes:
+        feature = features.corners[mesh.node_entity[node]]
+        if feature.names:
+            for name in feature.names:
+                groups.append(Group(name, 0, np.array([[node]])))
+    return _merge_same_names(groups)
+
+
+def _names(feature) -> list[str]:
+    return list(feature.names) or [feature.id]
+
+
+def _merge_same_names(groups: list[Group]) -> list[Group]:
+    """One group per (name, dim): a name on several features of one kind unites them."""
+    merged: dict = {}
+    for group in groups:
+        key = (group.name, group.dim)
+        merged[key] = group if key not in merged else Group(group.name, group.dim,
+                                                            np.concatenate([merged[key].cells, group.cells]))
+    names = [name for name, _ in merged]
+    return [g if names.count(g.name) == 1 else Group(f"{g.name}-{('corner', 'curve', 'surface', 'solid')[g.dim]}",
+                                                     g.dim, g.cells) for g in merged.values()]
+
+
+def curve_edges(mesh: TetMesh, features) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary edges that lie on feature curves, and the curve index of each."""
+    if len(mesh.boundary) == 0:
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
+    directed = np.stack([mesh.boundary, np.roll(mesh.boundary, -1, axis=1)], axis=2).reshape(-1, 2)
+    edges = directed[directed[:, 0] < directed[:, 1]]
+    on_curve = np.isin(mesh.node_level[edges], (CORNER, CURVE)).all(axis=1)
+    edges = edges[on_curve]
+    level, entity = mesh.node_level[edges], mesh.node_entity[edges]
+    curve = np.where(level[:, 0] == CURVE, entity[:, 0], np.where(level[:, 1] == CURVE, entity[:, 1], -1))
+    # an edge from corner to corner belongs to the curve that runs between those two corners
+    corner_vertex = np.array([c.vertex for c in features.corners], dtype=np.int64)
+    ends = {}
+    for index, c in enumerate(features.curves):
+        if c.vertices is not None and not c.closed and len(c.vertices) > 1:
+            ends.setdefault(tuple(sorted((int(c.vertices[0]), int(c.vertices[-1])))), index)
+    for row in np.flatnonzero(curve < 0):
+        key = tuple(sorted(corner_vertex[entity[row]].tolist()))
+        curve[row] = ends.get(key, -1)
+    # both nodes on the same curve (or an end corner): a chord of the curve, not a diagonal across a patch
+    same = np.where(level == CURVE, entity, curve[:, None]) == curve[:, None]
+    keep = (curve >= 0) & same.all(axis=1)
+    return edges[keep], curve[keep]
+
+
+def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6).
+
+    Mid-edge nodes of boundary edges are moved onto the input surface (onto
+    their feature curve for curve edges); where an element's Jacobian would
+    turn non-positive its mid-edge nodes move only part of the way (straight
+    at last), so every Jacobian is positive.
+    """
+    edges = np.sort(mesh.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    straight = mesh.points[unique].mean(axis=1)
+    curved = straight.copy()
+    boundary_edges = np.unique(np.sort(mesh.boundary[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1), axis=0)
+    on_boundary = _rows_in(unique, boundary_edges)
+    if on_boundary.any():
+        curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
+    chords, curve = curve_edges(mesh, features)
+    on_curve = _rows_in(unique, np.sort(chords, axis=1), index=True)
+    for c in np.unique(curve):
+        rows = on_curve[0][curve[on_curve[1]] == c]
+        curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
+    tets10 = np.hstack([mesh.tets, len(mesh.points) + inverse.reshape(-1, 6)])
+    for attempt in range(CURVING_ATTEMPTS + 1):   # halve the curving of elements that would fold
+        points = np.vstack([mesh.points, curved])
+        bad = np.flatnonzero(min_jacobian(points, tets10) <= 0)
+        if len(bad) == 0:
+            break
+        rows = np.unique(tets10[bad, 4:]) - len(mesh.points)
+        curved[rows] = straight[rows] if attempt == CURVING_ATTEMPTS else (curved[rows] + straight[rows]) / 2
+    triangles6 = _boundary_triangle6(mesh.boundary, unique, len(mesh.points))
+    return points, tets10, triangles6
+
+
+def _rows_in(rows: np.ndarray, table: np.ndarray, index: bool = False):
+    """Mask of ``rows`` (sorted node pairs) found in ``table``; with ``index``, (row, table row) pairs."""
+    n = int(max(rows.max(initial=0), table.max(initial=0))) + 1
+    keys, table_keys = rows[:, 0] * n + rows[:, 1], table[:, 0] * n + table[:, 1]
+    if not index:
+        return np.isin(keys, table_keys)
+    order = np.argsort(keys)
+    at = np.clip(np.searchsorted(keys[order], table_keys), 0, max(len(keys) - 1, 0))
+    found = keys[order][at] == table_keys
+    return order[at[found]], np.flatnonzero(found)
+
+
+def _boundary_triangle6(triangles, unique_edges, offset) -> np.ndarray:
+    edges = np.sort(triangles[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1)
+    n = int(unique_edges.max(initial=0)) + 1
+    keys = unique_edges[:, 0] * n + unique_edges[:, 1]
+    mid = offset + np.searchsorted(keys, edges[:, 0] * n + edges[:, 1])
+    return np.hstack([triangles, mid.reshape(-1, 3)])
+
+
+# shape-function gradients of the 10-node tet at a point (r, s, t), VTK order
+def _gradients(r, s, t):
+    u = 1 - r - s - t
+    return np.array([
+        [-(4 * u - 1), -(4 * u - 1), -(4 * u - 1)],
+        [4 * r - 1, 0, 0], [0, 4 * s - 1, 0], [0, 0, 4 * t - 1],
+        [4 * (u - r), -4 * r, -4 * r],
+        [4 * s, 4 * r, 0],
+        [-4 * s, 4 * (u - s), -4 * s],
+        [-4 * t, -4 * t, 4 * (u - t)],
+        [4 * t, 0, 4 * r],
+        [0, 4 * t, 4 * s],
+    ])
+
+
+SAMPLES = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (0.25, 0.25, 0.25),
+           (0.5, 0, 0), (0.5, 0.5, 0), (0, 0.5, 0), (0, 0, 0.5), (0.5, 0, 0.5), (0, 0.5, 0.5)]
+
+
+def min_jacobian(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
+    """Smallest Jacobian determinant of each 10-node tet over its nodes and centroid (x 6 = volume if straight)."""
+    x = points[tets10]                                  # (m, 10, 3)
+    out = np.full(len(tets10), np.inf)
+    for sample in SAMPLES:
+        jacobian = np.einsum("mai,aj->mij", x, _gradients(*sample))
+        out = np.minimum(out, np.linalg.det(jacobian))
+    return out

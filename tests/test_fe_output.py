@@ -1,0 +1,108 @@
+"""FE-ready files: physical groups in .msh (read by Gmsh itself), node sets and element-face surfaces in
+Abaqus .inp, quadratic tetrahedra with positive Jacobians and boundary nodes on the surface."""
+from __future__ import annotations
+
+import functools
+
+import gmsh
+import meshio
+import numpy as np
+import pytest
+import yaml
+
+from engine.cli import main
+from engine.fe import feature_groups, min_jacobian, quadratic
+from engine.io import ABAQUS_FACE
+from engine.mesh import NODE_LEVELS
+from engine.meshing.surface import arc_parameter
+from test_meshers import meshed, packed
+
+
+@functools.lru_cache(maxsize=None)
+def written(tmp_root, order):
+    folder = tmp_root / f"order{order}"
+    folder.mkdir()
+    job = folder / "job.yaml"
+    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0,
+                                   "output": {"formats": ["vtu", "msh", "inp"], "order": order}}))
+    assert main(["mesh", str(job), "--quiet"]) == 0
+    return folder / "out"
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    return tmp_path_factory.mktemp("fe")
+
+
+def test_msh_opens_in_gmsh_with_the_features_as_physical_groups(root):
+    out = written(root, 1)
+    gmsh.initialize(readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.open(str(out / "mesh.msh"))
+        groups = {gmsh.model.getPhysicalName(dim, tag): (dim, tag) for dim, tag in gmsh.model.getPhysicalGroups()}
+        assert {"solid", "junction", "cylinder", "top", "bottom", "plate-edge"} <= set(groups)
+        assert groups["solid"][0] == 3 and groups["junction"][0] == 1 and groups["cylinder"][0] == 2
+        _, nodes = gmsh.model.mesh.getNodesForPhysicalGroup(*groups["junction"])[:2]
+        assert len(nodes) > 10
+    finally:
+        gmsh.finalize()
+    vtu = meshio.read(out / "mesh.vtu")
+    msh = meshio.read(out / "mesh.msh")
+    assert len(msh.cells_dict["tetra"]) == len(vtu.cells_dict["tetra"])
+
+
+def test_abaqus_surfaces_are_the_patches_faces(root):
+    out = written(root, 1)
+    inp = meshio.read(out / "mesh.inp")
+    tets = inp.cells_dict["tetra"]
+    assert {"top", "cylinder", "plate_edge", "junction"} <= set(inp.point_sets)
+    text = (out / "mesh.inp").read_text()
+    assert "*SURFACE, TYPE=ELEMENT, NAME=cylinder" in text
+    # the element faces named by the cylinder surface are exactly the cylinder's boundary triangles
+    faces = {"S1": [0, 1, 2], "S2": [0, 3, 1], "S3": [1, 3, 2], "S4": [2, 3, 0]}
+    named = set()
+    for face in faces:
+        key = f"_cylinder_{face}"
+        if key in inp.cell_sets:
+            elements = np.concatenate([np.asarray(x, dtype=int) for x in inp.cell_sets[key]])
+            named |= {tuple(sorted(row)) for row in tets[elements][:, faces[face]].tolist()}
+    cylinder_nodes = set(inp.point_sets["cylinder"].tolist())
+    assert named and all(set(f) <= cylinder_nodes for f in named)
+    vtu = meshio.read(out / "mesh.vtu")
+    assert np.allclose(vtu.points, inp.points)
+    assert set(ABAQUS_FACE.values()) == set(faces)
+
+
+def test_quadratic_tets_have_positive_jacobians_and_curved_boundaries():
+    geometry, features, _, _ = packed("junction-edge")
+    mesh = meshed("junction-edge")
+    points, tets10, triangles6 = quadratic(mesh, geometry, features)
+    assert tets10.shape == (len(mesh.tets), 10) and triangles6.shape == (len(mesh.boundary), 6)
+    assert (min_jacobian(points, tets10) > 0).all()
+    middle = np.unique(triangles6[:, 3:])
+    _, distance, _ = geometry.closest_point(points[middle])
+    assert np.mean(distance < 1e-9 * geometry.scale) > 0.99, "boundary mid-edge nodes on the input surface"
+    assert distance.max() < 0.05 * geometry.scale / 40, "the rest moved part of the way"
+    # mid-edge nodes on the junction circle lie on the curve
+    junction = features.curves.index(features.named("junction")[0])
+    edge_groups = [g for g in feature_groups(mesh, features) if g.name == "junction"]
+    (group,) = edge_groups
+    curve = features.curves[junction]
+    edges = np.sort(group.cells, axis=1)
+    tet_edges = np.sort(tets10[:, [[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]]].reshape(-1, 2), axis=1)
+    mids = tets10[:, 4:].reshape(-1)
+    lookup = {tuple(e): m for e, m in zip(tet_edges.tolist(), mids.tolist())}
+    on = points[[lookup[tuple(e)] for e in edges.tolist()]]
+    off = np.linalg.norm(curve.point_at(arc_parameter(curve, on)) - on, axis=1)
+    assert np.mean(off < 1e-9 * geometry.scale) > 0.9, "mid-edge nodes of the junction on the circle"
+    assert (mesh.node_level[np.unique(edges)] <= NODE_LEVELS.index("curve")).all()
+
+
+def test_quadratic_files_read_back(root):
+    out = written(root, 2)
+    for name in ("mesh.vtu", "mesh.msh", "mesh.inp"):
+        data = meshio.read(out / name)
+        tets10 = data.cells_dict["tetra10"]
+        assert (min_jacobian(data.points, tets10) > 0).all(), name
+    assert "triangle6" in meshio.read(out / "mesh.msh").cells_dict
