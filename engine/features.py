@@ -126,7 +126,8 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
 
     ``face_groups`` are functions ``triangles (F, 3, 3) -> bool mask``; each
     marks faces that form patches of their own even where they meet their
-    neighbours smoothly (e.g. a tangent fillet). Their borders become curves.
+    neighbours smoothly (e.g. a tangent fillet). Their borders become curves,
+    as does the cut that halves a smooth closed patch (a sphere's surface).
     """
     mesh = geometry.mesh
     threshold = np.radians(feature_angle)
@@ -138,10 +139,25 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     truly_sharp = sharp.copy()
     sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
     patches, face_patch = _patches(geometry, adjacency[~sharp])
+    closed = np.setdiff1d(np.arange(len(patches)), face_patch[adjacency[sharp]])
+    if len(closed):   # a smooth closed patch (a sphere) is cut in two, so that every patch has a border
+        for k, p in enumerate(closed, start=group.max() + 1):
+            group[_half(mesh, patches[p].faces)] = k
+        sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
+        patches, face_patch = _patches(geometry, adjacency[~sharp])
     sharp_edges = mesh.face_adjacency_edges[sharp]
     corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
                               truly_sharp[sharp], threshold)
     return Features(corners, curves, patches, face_patch, feature_angle)
+
+
+def _half(mesh, faces: np.ndarray) -> np.ndarray:
+    """The faces of ``faces`` on one side of the plane through their centroid across their longest extent."""
+    centres = mesh.triangles_center[faces]
+    centred = centres - centres.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    along = centred @ axis
+    return faces[along > np.median(along)]
 
 
 def _patches(geometry: Geometry, smooth_pairs: np.ndarray):

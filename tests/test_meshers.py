@@ -122,3 +122,61 @@ def test_qhull_mesher_reports_its_boundary_defects():
     quality = tet_quality(mesh.points, mesh.tets)
     assert quality.min_dihedral.min() < 10.0
     assert len(mesh.boundary) == 0, "no conforming boundary is claimed"
+
+
+def mesh_file(tmp_path, mesh, size):
+    """Mesh a trimesh surface through the CLI; (exit code, stderr, vtu or None)."""
+    import subprocess
+    import sys
+
+    import meshio
+    import yaml
+
+    mesh.export(tmp_path / "solid.stl")
+    (tmp_path / "job.yaml").write_text(yaml.safe_dump({"geometry": {"file": "solid.stl"}, "size": size,
+                                                       "output": {"formats": ["vtu"]}}))
+    run = subprocess.run([sys.executable, "-m", "engine.cli", "mesh", "job.yaml", "--quiet"], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    out = tmp_path / "out" / "mesh.vtu"
+    return run.returncode, run.stderr, meshio.read(out) if out.exists() else None
+
+
+def test_a_sphere_is_cut_into_two_patches_and_meshed(tmp_path):
+    import trimesh
+
+    surface = trimesh.creation.icosphere(4, radius=10.0)
+    code, err, mesh = mesh_file(tmp_path, surface, 1.5)
+    assert code == 0, err
+    tets = mesh.cells_dict["tetra"]
+    p = mesh.points[tets]
+    volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
+    assert (volumes > 0).all()
+    assert volumes.sum() == pytest.approx(surface.volume, rel=0.015)
+    radius = np.linalg.norm(mesh.points[mesh.point_data["node_level"] < 3], axis=1)
+    assert radius.min() > 9.9, "surface nodes stay on the sphere"
+
+
+def test_a_smooth_torus_is_refused_in_one_line(tmp_path):
+    import trimesh
+
+    code, err, mesh = mesh_file(tmp_path, trimesh.creation.torus(20.0, 6.0), 2.0)
+    assert code == 2 and mesh is None
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("fuzzymesh: error: ") and "cannot be flattened" in lines[0]
+    assert "solid.stl" in lines[0] and "Traceback" not in err
+
+
+def test_an_acute_wedge_meshes_with_a_closed_boundary(tmp_path):
+    import trimesh
+
+    angle = np.radians(20)
+    base = np.array([[0, 0, 0], [60, 0, 0], [60 * np.cos(angle), 60 * np.sin(angle), 0]])
+    vertices = np.vstack([base, base + [0, 0, 15]])
+    faces = [[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]
+    surface = trimesh.Trimesh(vertices, faces)
+    code, err, mesh = mesh_file(tmp_path, surface, 3.0)
+    assert code == 0, err
+    tets = mesh.cells_dict["tetra"]
+    p = mesh.points[tets]
+    volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
+    assert (volumes > 0).all() and volumes.sum() == pytest.approx(surface.volume, rel=1e-6)

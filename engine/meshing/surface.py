@@ -256,6 +256,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
         deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
         badness = np.fmax(badness, deviation / (DEVIATION * h))
+        badness[np.isnan(lifted[:, 0])] = 0.0     # off a conformal chart's triangles: nowhere to put a node
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
         return np.zeros((0, 2)), np.zeros(0)
@@ -324,7 +325,7 @@ class PatchChart:
                 self.middle = angles[k] + gaps[k] / 2
         else:
             self.kind = "conformal"
-            self.vertex_uv = self._conformal_map(patch)
+            self.vertex_uv = self._conformal_map(patch, geometry.source)
             self.centres_uv = cKDTree(self.vertex_uv[self.faces].mean(axis=1))
 
     def _angle(self, x):
@@ -359,6 +360,8 @@ class PatchChart:
 
     def _lift_conformal(self, uv):
         out = np.full((len(uv), 3), np.nan)
+        if len(uv) == 0:
+            return out
         _, near = self.centres_uv.query(uv, k=min(16, len(self.faces)))
         near = near.reshape(len(uv), -1)
         for column in range(near.shape[1]):      # the first candidate face that contains the point
@@ -380,13 +383,17 @@ class PatchChart:
         return [(np.flatnonzero(uv[:, 0] < -half + span), np.array([self.turn, 0.0])),
                 (np.flatnonzero(uv[:, 0] >= half - span), np.array([-self.turn, 0.0]))]
 
-    def _conformal_map(self, patch) -> np.ndarray:
+    def _conformal_map(self, patch, source) -> np.ndarray:
         loops = igl.boundary_loop_all(self.faces) if len(self.faces) else []
-        if not len(loops):
-            raise GeometryError(f"surface patch '{patch.id}' is closed and smooth and cannot be flattened",
-                                fix="split it by feature curves (lower geometry.feature_angle) or mesh a solid "
-                                    "whose smooth faces have borders")
-        loop = np.asarray(max(loops, key=len))
+        edges = np.unique(np.sort(self.faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+        euler = len(self.vertices) - len(edges) + len(self.faces)
+        if len(loops) != 1 or euler != 1:
+            raise GeometryError(f"the smooth surface patch '{patch.id}' ({patch.names[0] if patch.names else 'unnamed'}"
+                                f", {len(loops)} border loops, Euler characteristic {euler}) is not a disk, a plane or a "
+                                "cylinder and cannot be flattened", where=source,
+                                fix="lower geometry.feature_angle so that feature curves cut it into disk-like "
+                                    "patches, or split the face in the CAD model")
+        loop = np.asarray(loops[0])
         pinned = np.array([loop[0], loop[len(loop) // 2]])
         span = np.linalg.norm(self.vertices[pinned[1]] - self.vertices[pinned[0]])
         uv, _ = igl.lscm(self.vertices, self.faces, pinned, np.array([[0.0, 0.0], [span, 0.0]]))
@@ -395,8 +402,8 @@ class PatchChart:
             uv[:, 0] *= -1
             area = -area
         if np.any(area <= 0):
-            raise GeometryError(f"surface patch '{patch.id}' folds over when flattened",
-                                fix="split it by feature curves (lower geometry.feature_angle)")
+            raise GeometryError(f"surface patch '{patch.id}' folds over when flattened", where=source,
+                                fix="lower geometry.feature_angle so that feature curves split it")
         return uv
 
 
