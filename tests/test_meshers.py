@@ -122,6 +122,8 @@ def test_qhull_mesher_reports_its_boundary_defects():
     quality = tet_quality(mesh.points, mesh.tets)
     assert quality.min_dihedral.min() < 10.0
     assert len(mesh.boundary) == 0, "no conforming boundary is claimed"
+    assert mesh.stats["boundary_faces_through_volume"] > 0, "free faces cut through the solid"
+    assert mesh.stats["boundary_faces"] == len(mesh.boundary_faces())
 
 
 def mesh_file(tmp_path, mesh, size):
