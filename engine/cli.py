@@ -12,7 +12,9 @@ import os
 import sys
 from pathlib import Path
 
-from .errors import FuzzymeshError
+import numpy as np
+
+from .errors import FuzzymeshError, JobError
 
 log = logging.getLogger("fuzzymesh")
 
@@ -63,9 +65,14 @@ def build_parser() -> argparse.ArgumentParser:
     lint.add_argument("paths", nargs="*", type=Path, help="files or folders (default: the shipped knowledge base)")
     lint.set_defaults(run=_cmd_lint)
 
-    explain = commands.add_parser("explain", help="explain the element size at a point of a job")
-    explain.add_argument("job", help="job YAML file")
-    explain.add_argument("--at", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"))
+    explain = commands.add_parser("explain", help="explain why a point or an element got its size",
+                                  description="TARGET is a job file (--at: the sizing at a point) or a mesh "
+                                              "output folder or .vtu with its .audit.json (--element N, 0-based, "
+                                              "or --at: the element containing the point)")
+    explain.add_argument("job", metavar="TARGET", help="job YAML file, or output folder / .vtu file")
+    where = explain.add_mutually_exclusive_group(required=True)
+    where.add_argument("--at", nargs=3, type=float, metavar=("X", "Y", "Z"))
+    where.add_argument("--element", type=int, metavar="N")
     explain.set_defaults(run=_cmd_explain)
 
     for noun in ("patterns", "recipes"):
@@ -94,10 +101,16 @@ def _cmd_lint(args) -> int:
 
 
 def _cmd_explain(args) -> int:
+    target = Path(args.job)
+    if target.is_dir() or target.suffix == ".vtu":
+        return _explain_saved(target, args)
+    if args.element is not None:
+        raise JobError("--element needs a mesh output folder or .vtu, not a job file", where=str(target),
+                       fix="run 'fuzzymesh mesh' first and give its output folder")
+    from .explain import explain_point
     from .job import load_job
     from .knowledge import load_knowledge
     from .pipeline import build_geometry, build_sizing, check_job_knowledge
-    from .explain import explain_point
 
     logging.getLogger().setLevel(logging.WARNING)
     job = load_job(args.job)
@@ -107,6 +120,38 @@ def _cmd_explain(args) -> int:
     sizing = build_sizing(job, geometry, features, kb)
     inside = bool(geometry.contains([args.at])[0])
     print(explain_point(sizing, args.at, inside))
+    return 0
+
+
+def _explain_saved(target: Path, args) -> int:
+    """--element / --at on a written mesh, from its VTU audit fields and JSON legend."""
+    import json
+
+    import meshio
+
+    from .audit import explain_element, element_at
+
+    vtu = target if target.suffix == ".vtu" else next(iter(sorted(target.glob("*.vtu"))), target / "mesh.vtu")
+    legend_path = vtu.with_suffix(".audit.json")
+    for path in (vtu, legend_path):
+        if not path.is_file():
+            raise JobError("no saved mesh audit here", where=str(path),
+                           fix="give the output folder of 'fuzzymesh mesh' (it writes <name>.vtu and <name>.audit.json)")
+    mesh = meshio.read(vtu)
+    cells = {name: values[0] for name, values in mesh.cell_data.items()}
+    legend = json.loads(legend_path.read_text())
+    element = args.element
+    if args.at is not None:
+        tets = next(block.data for block in mesh.cells if block.type.startswith("tetra"))[:, :4]
+        element = element_at(mesh.points, tets, np.asarray(args.at, dtype=float))
+        if element < 0:
+            print(f"point ({', '.join(f'{c:.6g}' for c in args.at)}) is in no element of {vtu}")
+            return 1
+        print(f"point ({', '.join(f'{c:.6g}' for c in args.at)}) lies in element {element}")
+    try:
+        print(explain_element(cells, legend, element))
+    except IndexError as error:
+        raise JobError(str(error), where=str(vtu), fix="give an element number from 0 to the element count - 1") from None
     return 0
 
 

@@ -1,6 +1,7 @@
 """Writing meshes through meshio, atomically (temporary file + rename)."""
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -26,27 +27,37 @@ class FEModel:
     node_level: np.ndarray        # -1 for mid-edge nodes
     node_entity: np.ndarray
     groups: list = field(default_factory=list)
+    cell_data: dict = field(default_factory=dict)    # per element (the audit)
+    point_data: dict = field(default_factory=dict)   # per node (the audit; -1 / 0 on mid-edge nodes)
+    legend: dict | None = None                       # the audit legend, written as <name>.audit.json
 
     @staticmethod
-    def build(mesh: TetMesh, groups=(), quadratic=None) -> "FEModel":
+    def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
         """``quadratic``: (points, tets10, triangle6) from engine.fe.quadratic, or None for linear."""
-        if quadratic is None:
-            return FEModel(mesh.points, mesh.tets, mesh.boundary, mesh.node_level, mesh.node_entity, list(groups))
-        points, tets10, triangles6 = quadratic
+        points, tets, boundary = (mesh.points, mesh.tets, mesh.boundary) if quadratic is None else quadratic
         extra = len(points) - len(mesh.points)
-        return FEModel(points, tets10, triangles6, np.r_[mesh.node_level, np.full(extra, -1)],
-                       np.r_[mesh.node_entity, np.full(extra, -1)], list(groups))
+
+        def pad(values):
+            return np.r_[values, np.full(extra, -1 if values.dtype.kind in "iu" else 0, dtype=values.dtype)]
+
+        point_data = {k: pad(v) for k, v in audit.nodes.items()} if audit else {}
+        return FEModel(points, tets, boundary, pad(mesh.node_level), pad(mesh.node_entity), list(groups),
+                       dict(audit.cells) if audit else {}, point_data, audit.legend if audit else None)
 
     @property
     def quadratic(self) -> bool:
         return self.tets.shape[1] == 10
 
 
-def to_meshio(model: FEModel) -> meshio.Mesh:
-    """The tetrahedra with node tags (for VTU and Abaqus)."""
+def to_meshio(model: FEModel, audit: bool = False) -> meshio.Mesh:
+    """The tetrahedra with node tags (for VTU and Abaqus), and with ``audit`` the audit fields."""
+    point_data = {"node_level": model.node_level.astype(np.int32), "node_entity": model.node_entity.astype(np.int32)}
+    cell_data = {}
+    if audit:
+        point_data.update(model.point_data)
+        cell_data = {name: [values] for name, values in model.cell_data.items()}
     return meshio.Mesh(model.points, [("tetra10" if model.quadratic else "tetra", model.tets.astype(np.int64))],
-                       point_data={"node_level": model.node_level.astype(np.int32),
-                                   "node_entity": model.node_entity.astype(np.int32)})
+                       point_data=point_data, cell_data=cell_data)
 
 
 def to_gmsh(model: FEModel) -> meshio.Mesh:
@@ -161,7 +172,11 @@ def write_all_or_nothing(targets: list[tuple[Path, object]]) -> list[Path]:
 
 def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Path]:
     """Write ``model`` as ``directory/name.<format>`` for each format; return the paths."""
-    writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model), file_format="vtu"),
+    writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
                "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
                "inp": lambda tmp: write_abaqus(tmp, model)}
-    return write_all_or_nothing([(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats])
+    targets = [(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats]
+    if model.legend is not None:
+        targets.append((Path(directory) / f"{name}.audit.json",
+                        lambda tmp: Path(tmp).write_text(json.dumps(model.legend, indent=1))))
+    return write_all_or_nothing(targets)

@@ -17,6 +17,7 @@ class TetMesh:
     patch index in the Features (-1 in the volume and for Steiner nodes).
     ``boundary`` triangles are outward and each lies on surface patch
     ``boundary_patch``; both are empty for a mesher that does not conform.
+    ``node_bubble`` links nodes to the packing's bubbles and their population events.
     """
 
     points: np.ndarray         # (n, 3)
@@ -26,6 +27,7 @@ class TetMesh:
     stats: dict = field(default_factory=dict)
     boundary: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     boundary_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    node_bubble: np.ndarray | None = None   # (n,) the packing's bubble id of each node, -1 for added nodes
 
     def volumes(self) -> np.ndarray:
         p = self.points[self.tets]

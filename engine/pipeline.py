@@ -12,6 +12,7 @@ import numpy as np
 from .errors import JobError, LimitError
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
+from .audit import Audit, audit_mesh
 from .fe import Group, feature_groups, quadratic
 from .io import FEModel, write_mesh
 from .job import Job
@@ -40,6 +41,7 @@ class Result:
     timings: dict = field(default_factory=dict)
     quality: dict = field(default_factory=dict)
     files: list[Path] = field(default_factory=list)
+    audit: Audit | None = None
 
 
 @contextmanager
@@ -98,11 +100,11 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
 
 
-def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features) -> FEModel:
-    """The mesh as the files hold it: the job's element order, with the features' named groups."""
+def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None) -> FEModel:
+    """The mesh as the files hold it: the job's element order, the features' named groups, the audit."""
     quadratic_elements = quadratic(mesh, geometry, features) if job.output_order == 2 else None
     return FEModel.build(mesh, feature_groups(mesh, features) if len(mesh.boundary) else
-                         [Group("solid", 3, np.arange(len(mesh.tets)))], quadratic_elements)
+                         [Group("solid", 3, np.arange(len(mesh.tets)))], quadratic_elements, audit)
 
 
 def describe_mesher_stats(stats: dict) -> str:
@@ -147,10 +149,17 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              "radius ratio min %.3f, %d below 0.1 (%.2f s)", quality["min_dihedral"]["min"],
              quality["min_dihedral"]["p01"], below["min_dihedral_10"], below["min_dihedral_5"],
              quality["radius_ratio"]["min"], below["radius_ratio_0.1"], timings["quality"])
-    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality)
+    with stage("audit", timings):
+        audit = audit_mesh(mesh, sizing, packing, features, kb, str(job.source))
+    shares = np.bincount(audit.cells["winner"] + 1, minlength=len(sizing.placed) + 1) / max(len(mesh.tets), 1)
+    winners = ", ".join(f"{name} {100 * share:.1f} %" for name, share in
+                        zip(["none"] + [p.id for p in sizing.placed], shares) if share > 0)
+    log.info("audit: %d elements sized by %s; %.1f %% lowered by the gradation limit (%.2f s)", len(mesh.tets),
+             winners, 100 * np.mean(audit.cells["graded"]), timings["audit"])
+    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit)
     if write:
         with stage("output", timings):
-            result.files = write_mesh(fe_model(job, mesh, geometry, features), job.output_dir, job.output_name,
-                                      job.output_formats)
+            result.files = write_mesh(fe_model(job, mesh, geometry, features, audit), job.output_dir,
+                                      job.output_name, job.output_formats)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result

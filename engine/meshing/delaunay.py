@@ -47,6 +47,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     points = np.vstack([points, steiner])
     level = np.concatenate([packing.level[nodes], np.full(len(steiner), STEINER)]).astype(np.int8)
     entity = np.concatenate([packing.entity[nodes], np.full(len(steiner), -1)]).astype(np.int64)
+    bubble = np.concatenate([packing.ids[nodes] if packing.ids is not None else np.full(len(nodes), -1),
+                             np.full(len(steiner), -1)]).astype(np.int64)
     hull_tets = len(tets)
     tets = tets[inside_by_boundary(points, tets, boundary)]
     tets = canonical(orient(points, tets)[0])    # Gmsh's order varies from run to run
@@ -59,7 +61,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     points, moves = relocate(points, tets, _slide_directions(level, entity, features), seed)
     seconds["improve"] = time.perf_counter() - start
 
-    points, tets, level, entity, renumber = compact(points, tets, level, entity)
+    points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
     boundary = renumber[boundary]
     stats = {"boundary_triangles": len(boundary), "crowded_surface_nodes_dropped": len(surface.dropped),
              "curve_nodes_added": int((packing.level == CURVE).sum() - (packing_in.level == CURVE).sum()),
@@ -72,7 +74,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
              "min dihedral %.2f -> %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
              len(tets), len(steiner), seconds["connect"], before, _worst(points, tets), moves, seconds["improve"])
     order = np.argsort(surface.patch, kind="stable")
-    return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order])
+    return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order], bubble)
 
 
 def _slide_directions(level, entity, features) -> np.ndarray:

@@ -37,8 +37,9 @@ def mesh_qhull(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     h = 2 * packing.radius[tets].mean(axis=1)
     keep = volume > FLAT_VOLUME * h ** 3
     keep[keep] = geometry.contains(points[tets[keep]].mean(axis=1))
-    points, tets, level, entity, _ = compact(points, tets[keep], packing.level, packing.entity)
-    mesh = TetMesh(points, canonical(tets), level.astype(np.int8), entity)
+    bubble = packing.ids if packing.ids is not None else np.full(len(packing), -1)
+    points, tets, level, entity, bubble, _ = compact(points, tets[keep], packing.level, packing.entity, bubble)
+    mesh = TetMesh(points, canonical(tets), level.astype(np.int8), entity, node_bubble=bubble)
     mesh.stats = {"delaunay_tets": total, "outside_or_flat_dropped": int(total - len(tets)),
                   "unused_nodes_dropped": int(len(packing) - len(points)), **boundary_defects(mesh),
                   "seconds": {"connect": round(time.perf_counter() - start, 3)}}

@@ -30,6 +30,7 @@ HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks
 DEVIATION = 0.07  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 3  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5     # no node is added nearer than this x h to another
+NO_BUBBLE = -1    # the bubble id of a node the mesher adds
 
 
 @dataclass
@@ -131,7 +132,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             index = np.concatenate([members, next_node + np.arange(len(new_points))])
             next_node += len(new_points)
             added.append(Packing(new_points, np.full(len(new_points), PATCH, np.int8), np.full(len(new_points), p),
-                                 new_radius))
+                                 new_radius, ids=np.full(len(new_points), NO_BUBBLE)))
             triangles.append(index[tri])
             patch_of.append(np.full(len(tri), p))
             dropped.append(members[crowded])
@@ -182,8 +183,10 @@ def _split_chain_edges(nodes, features, chains, pairs):
         points.append(curve.point_at(s.mean(axis=1)))
         entity.append(np.full(hit.sum(), index))
         radius.append(nodes.radius[ends[hit]].mean(axis=1))
-    return Packing(np.vstack([nodes.points, *points]), np.concatenate([nodes.level, np.full(sum(map(len, entity)), CURVE)]).astype(np.int8),
-                   np.concatenate([nodes.entity, *entity]).astype(np.int64), np.concatenate([nodes.radius, *radius]))
+    count = sum(map(len, entity))
+    added = Packing(np.vstack(points), np.full(count, CURVE, np.int8), np.concatenate(entity).astype(np.int64),
+                    np.concatenate(radius), ids=np.full(count, NO_BUBBLE))
+    return Packing.concatenate([nodes, added], nodes.stats)
 
 
 def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):

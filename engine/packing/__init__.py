@@ -33,8 +33,8 @@ class Packing:
     @staticmethod
     def concatenate(parts: list["Packing"], stats: dict | None = None) -> "Packing":
         ids = None
-        if all(p.ids is not None for p in parts):
-            ids = np.concatenate([p.ids for p in parts]).astype(np.int64)
+        if any(p.ids is not None for p in parts):   # parts without ids get -1
+            ids = np.concatenate([p.ids if p.ids is not None else np.full(len(p), -1) for p in parts]).astype(np.int64)
         return Packing(np.concatenate([p.points for p in parts]).reshape(-1, 3),
                        np.concatenate([p.level for p in parts]).astype(np.int8),
                        np.concatenate([p.entity for p in parts]).astype(np.int64),

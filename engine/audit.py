@@ -1,0 +1,171 @@
+"""Why every element got its size, and where every node came from: the audit and its legend.
+
+Per element (at its centroid, by the sizing field's own evaluation): the target size and the
+element's actual size (mean edge length), the winning placed pattern and its membership mu, the
+runner-up and its mu, whether the gradation limit lowered the size and by how much, the winning
+zone and the placement (recipe or job entry) behind it. Per node: its level and entity, its bubble
+and the population-control event that inserted it (iteration, rule, firing degree).
+
+Integer ids go into the mesh files (ParaView colours them as categories); the legend maps each id
+to its name, source file:line and parameters, and is written as JSON beside the mesh.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import NODE_LEVELS, TetMesh
+from .quality import EDGES
+
+FORMAT = "fuzzymesh-audit/1"
+
+
+@dataclass
+class Audit:
+    cells: dict      # name -> (m,) array per element
+    nodes: dict      # name -> (n,) array per node
+    legend: dict     # JSON-ready
+
+
+def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_source: str | None = None) -> Audit:
+    """The audit of ``mesh`` (see the module doc)."""
+    centroids = mesh.points[mesh.tets].mean(axis=1)
+    evaluation = sizing.evaluate(centroids)
+    rows = np.arange(len(mesh.tets))
+    winner, runner_up = evaluation.winner, evaluation.runner_up
+    zone_offset = np.cumsum([0] + [len(p.zones) for p in sizing.placed])
+    placements = list(dict.fromkeys(id(p.placement) for p in sizing.placed))
+    placement_of = np.array([placements.index(id(p.placement)) for p in sizing.placed] + [-1])
+    edge = mesh.points[mesh.tets[:, EDGES[:, 1]]] - mesh.points[mesh.tets[:, EDGES[:, 0]]]
+    h_actual = np.linalg.norm(edge, axis=2).mean(axis=1)
+    cells = {
+        "h_target": evaluation.h, "h_actual": h_actual, "size_ratio": h_actual / evaluation.h,
+        "winner": winner.astype(np.int32),
+        "winner_mu": np.where(winner >= 0, evaluation.mu[rows, np.maximum(winner, 0)], 0.0),
+        "runner_up": runner_up.astype(np.int32),
+        "runner_up_mu": np.where(runner_up >= 0, evaluation.mu[rows, np.maximum(runner_up, 0)], 0.0),
+        "graded": evaluation.graded.astype(np.int8),
+        "gradation": evaluation.raw - evaluation.h,
+        "zone": np.where(winner >= 0, zone_offset[np.maximum(winner, 0)] + evaluation.zone, -1).astype(np.int32),
+        "placement": placement_of[winner].astype(np.int32),
+    }
+    nodes, rules = _node_history(mesh, packing, knowledge)
+    legend = {
+        "format": FORMAT, "job": job_source,
+        "element_fields": {"h_target": "target size at the centroid", "h_actual": "mean edge length",
+                           "size_ratio": "h_actual / h_target", "winner": "index into patterns",
+                           "winner_mu": "membership of the winner", "runner_up": "index into patterns, -1: none",
+                           "runner_up_mu": "membership of the runner-up", "graded": "1 if the gradation limit "
+                           "lowered the size", "gradation": "how much it lowered it", "zone": "index into zones",
+                           "placement": "index into placements"},
+        "node_fields": {"node_level": "index into levels", "node_entity": "index into corners / curves / patches "
+                        "by level", "bubble": "bubble id, -1 for nodes the mesher added",
+                        "inserted_at": "packing iteration of the inserting event, -1: initial bubble",
+                        "insert_rule": "index into rules, -1: none", "insert_firing": "firing degree"},
+        "global_size": sizing.global_size, "gradation_limit": sizing.gradation,
+        "patterns": [{"index": k, **_plain(p.legend()), "placement_index": int(placement_of[k])}
+                     for k, p in enumerate(sizing.placed)],
+        "zones": [{"index": int(zone_offset[k] + j), "pattern": p.id, "id": z.zone.id, "law": z.zone.law,
+                   "source": z.zone.source} for k, p in enumerate(sizing.placed) for j, z in enumerate(p.zones)],
+        "placements": [_placement(next(p.placement for p in sizing.placed if id(p.placement) == key), i)
+                       for i, key in enumerate(placements)],
+        "rules": rules,
+        "levels": list(NODE_LEVELS),
+        "corners": [{"index": k, "id": c.id, "names": c.names} for k, c in enumerate(features.corners)],
+        "curves": [{"index": k, "id": c.id, "names": c.names} for k, c in enumerate(features.curves)],
+        "patches": [{"index": k, "id": p.id, "names": p.names} for k, p in enumerate(features.patches)],
+    }
+    return Audit(cells, nodes, legend)
+
+
+def _node_history(mesh: TetMesh, packing, knowledge):
+    """Per node: bubble id and the event that inserted it; the legend of the population rules."""
+    n = len(mesh.points)
+    bubble = mesh.node_bubble if mesh.node_bubble is not None else np.full(n, -1)
+    inserts = [e for e in packing.events if e.action == "insert"]
+    rule_ids = list(dict.fromkeys(e.rule for e in packing.events))
+    sources = {}
+    if knowledge is not None:
+        for base in knowledge.rulebases.values():
+            sources.update({r.id: r.source for r in base.rules})
+    inserted_at, insert_rule, insert_firing = np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n)
+    if inserts:
+        ids = np.array([e.bubble for e in inserts])
+        order = np.argsort(ids)
+        at = np.clip(np.searchsorted(ids[order], bubble), 0, len(ids) - 1)
+        found = (bubble >= 0) & (ids[order][at] == bubble)
+        event = order[at[found]]
+        inserted_at[found] = [inserts[i].iteration for i in event]
+        insert_rule[found] = [rule_ids.index(inserts[i].rule) for i in event]
+        insert_firing[found] = [inserts[i].firing for i in event]
+    counts = {r: {"insert": 0, "delete": 0} for r in rule_ids}
+    for e in packing.events:
+        counts[e.rule][e.action] += 1
+    rules = [{"index": k, "id": r, "source": sources.get(r, ""), "insertions": counts[r]["insert"],
+              "deletions": counts[r]["delete"]} for k, r in enumerate(rule_ids)]
+    nodes = {"node_level": mesh.node_level.astype(np.int32), "node_entity": mesh.node_entity.astype(np.int32),
+             "bubble": bubble.astype(np.int64), "inserted_at": inserted_at, "insert_rule": insert_rule,
+             "insert_firing": insert_firing}
+    return nodes, rules
+
+
+def _placement(placement, index: int) -> dict:
+    return {"index": index, "id": placement.id, "pattern": placement.pattern, "origin": placement.origin,
+            "source": placement.source, "at": placement.at, "every": placement.every,
+            "parameters": _plain(placement.parameters)}
+
+
+def _plain(value):
+    """JSON-ready copy: numpy scalars and arrays to Python numbers and lists."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def explain_element(cells: dict, legend: dict, element: int) -> str:
+    """The chain of reasoning for one element, from the saved audit, in plain words."""
+    m = len(cells["h_target"])
+    if not 0 <= element < m:
+        raise IndexError(f"element {element} is not in the mesh (0 to {m - 1})")
+    get = {name: cells[name][element] for name in cells}
+    patterns = legend["patterns"]
+    lines = [f"element {element} (0-based): target size h = {get['h_target']:.6g} at its centroid, "
+             f"actual mean edge length {get['h_actual']:.6g} (ratio {get['size_ratio']:.3f})"]
+    winner = int(get["winner"])
+    if winner >= 0:
+        p = patterns[winner]
+        zone = legend["zones"][int(get["zone"])]
+        placement = legend["placements"][p["placement_index"]]
+        lines.append(f"winner: {p['id']} (pattern '{p['pattern']}') with membership mu = {get['winner_mu']:.4f}"
+                     + (f" on {p['feature']}" if p.get("feature") else ""))
+        lines.append(f"  placed by {placement['origin']} ({placement['id']}) at {placement['source']}")
+        lines.append(f"  its zone '{zone['id']}' ({zone['law']} law, {zone['source']}) set the raw size")
+        runner = int(get["runner_up"])
+        lines.append(f"runner-up: {patterns[runner]['id']} with mu = {get['runner_up_mu']:.4f}: it loses, "
+                     "the highest membership wins" if runner >= 0 else "no other pattern reaches this element")
+    else:
+        lines.append(f"no pattern reaches here: the global size H = {legend['global_size']:.6g} applies")
+    if get["graded"]:
+        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} lowered the size by "
+                     f"{get['gradation']:.6g} (a smaller size nearby)")
+    else:
+        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} is not active here")
+    return "\n".join(lines)
+
+
+def element_at(points: np.ndarray, tets: np.ndarray, point: np.ndarray) -> int:
+    """The first tet (0-based) that contains ``point``, -1 if none."""
+    a, b, c, d = (points[tets[:, i]] for i in range(4))
+    matrix = np.stack([b - a, c - a, d - a], axis=2)              # (m, 3, 3)
+    weights = np.linalg.solve(matrix, (point - a)[:, :, None])[:, :, 0]
+    tolerance = 1e-9
+    inside = (weights >= -tolerance).all(axis=1) & (weights.sum(axis=1) <= 1 + tolerance)
+    found = np.flatnonzero(inside)
+    return int(found[0]) if len(found) else -1
