@@ -127,6 +127,25 @@ def write_abaqus(path, model: FEModel) -> None:
         handle.write("\n".join(lines) + ("\n" if lines else ""))
 
 
+def write_nastran(path, model: FEModel) -> None:
+    """Nastran bulk data: GRID* (large field, 16-character reals) and CTETRA (4 or 10 nodes, PSOLID 1).
+
+    Written here rather than by meshio, whose Nastran writer fails on negative
+    reals with two-digit exponents (more than 16 characters).
+    """
+    ids = np.arange(1, len(model.points) + 1)
+    with open(path, "w") as handle:
+        handle.write("$ written by fuzzymesh\nBEGIN BULK\n")
+        handle.writelines(f"GRID*   {i:>16d}{0:>16d}{x:>16.9E}{y:>16.9E}\n*       {z:>16.9E}\n"
+                          for i, (x, y, z) in zip(ids.tolist(), model.points.tolist()))
+        nodes = model.tets + 1
+        for e, row in enumerate(nodes.tolist(), start=1):
+            head = "".join(f"{n:>8d}" for n in row[:6])
+            tail = "".join(f"{n:>8d}" for n in row[6:])
+            handle.write(f"CTETRA  {e:>8d}{1:>8d}{head}\n" + (f"+       {tail}\n" if tail else ""))
+        handle.write("ENDDATA\n")
+
+
 def _abaqus_name(name: str) -> str:
     return name.replace("-", "_").replace(" ", "_")
 
@@ -174,7 +193,9 @@ def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -
     """Write ``model`` as ``directory/name.<format>`` for each format; return the paths."""
     writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
                "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
-               "inp": lambda tmp: write_abaqus(tmp, model)}
+               "inp": lambda tmp: write_abaqus(tmp, model),
+               "bdf": lambda tmp: write_nastran(tmp, model),
+               "med": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="med")}
     targets = [(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats]
     if model.legend is not None:
         targets.append((Path(directory) / f"{name}.audit.json",

@@ -17,7 +17,7 @@ from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_r
 from .shapes import SHAPES
 from .yamlfile import Located, load_yaml, located
 
-OUTPUT_FORMATS = ("vtu", "msh", "inp")
+OUTPUT_FORMATS = ("vtu", "msh", "inp", "bdf", "med")
 
 
 def _plain_name(value):

@@ -20,7 +20,7 @@ from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
-from .quality import tet_quality
+from .quality import boundary_report, size_conformity, tet_quality
 from .shapes import build_shape
 from .sizing import SizingField, bind, check_element_limit
 
@@ -42,6 +42,8 @@ class Result:
     quality: dict = field(default_factory=dict)
     files: list[Path] = field(default_factory=list)
     audit: Audit | None = None
+    conformity: dict = field(default_factory=dict)
+    boundary: dict = field(default_factory=dict)
 
 
 @contextmanager
@@ -149,6 +151,21 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              "radius ratio min %.3f, %d below 0.1 (%.2f s)", quality["min_dihedral"]["min"],
              quality["min_dihedral"]["p01"], below["min_dihedral_10"], below["min_dihedral_5"],
              quality["radius_ratio"]["min"], below["radius_ratio_0.1"], timings["quality"])
+    with stage("boundary", timings):
+        boundary = boundary_report(mesh, geometry)
+    log.info("boundary (pymeshlab): %d triangles, %s, %d boundary edges, %d component(s); Hausdorff to the input "
+             "max %.4g, mean %.4g; area %+.3f %%, volume %+.3f %% of the input's; triangle quality min %.3f (%.2f s)",
+             boundary["triangles"], "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
+             boundary["boundary_edges"], boundary["components"], boundary["hausdorff_input_to_mesh"]["max"],
+             boundary["hausdorff_input_to_mesh"]["mean"], 100 * (boundary["area"] / boundary["input_area"] - 1),
+             100 * (boundary["volume"] / boundary["input_volume"] - 1), boundary["triangle_quality"]["min"],
+             timings["boundary"])
+    with stage("conformity", timings):
+        conformity = size_conformity(mesh, sizing)
+    log.info("size conformity: edge length / target size median %.3f, %.1f %% within [%g, %g] (%s) (%.2f s)",
+             conformity["median"], 100 * conformity["within"], *conformity["band"],
+             ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items()
+                       if s["edges"]), timings["conformity"])
     with stage("audit", timings):
         audit = audit_mesh(mesh, sizing, packing, features, kb, str(job.source))
     shares = np.bincount(audit.cells["winner"] + 1, minlength=len(sizing.placed) + 1) / max(len(mesh.tets), 1)
@@ -156,7 +173,8 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
                         zip(["none"] + [p.id for p in sizing.placed], shares) if share > 0)
     log.info("audit: %d elements sized by %s; %.1f %% lowered by the gradation limit (%.2f s)", len(mesh.tets),
              winners, 100 * np.mean(audit.cells["graded"]), timings["audit"])
-    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit)
+    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit,
+                    conformity=conformity, boundary=boundary)
     if write:
         with stage("output", timings):
             result.files = write_mesh(fe_model(job, mesh, geometry, features, audit), job.output_dir,

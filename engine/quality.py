@@ -123,20 +123,22 @@ def _metrics(points, tets, faces, edges, opposite):
     return volume, radius_ratio, mean_ratio, min_dihedral, max_dihedral, aspect
 
 
-def surface_deviation(mesh, geometry, sizing) -> dict:
+def surface_deviation(mesh, geometry, sizing, samples: int = 400_000) -> dict:
     """How far the mesh boundary strays from the input surface, absolute and over the local size h.
 
     ``input_to_mesh``: from the input surface (its vertices, edge midpoints and
-    face centroids) to the mesh's boundary triangles, the one-sided Hausdorff
+    ``samples`` points spread over it, seeded) to the mesh's boundary triangles, the one-sided Hausdorff
     distance the chords make; ``nodes_off_surface``: the largest distance of a
     boundary node from the input surface (0 up to rounding for a conforming mesher).
     """
     import igl
 
+    import trimesh
+
     surface = geometry.mesh
     boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
-    samples = np.vstack([surface.vertices, surface.vertices[surface.edges_unique].mean(axis=1),
-                         surface.triangles_center])
+    spread, _ = trimesh.sample.sample_surface(surface, samples, seed=0)
+    samples = np.vstack([surface.vertices, surface.vertices[surface.edges_unique].mean(axis=1), spread])
     d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(samples, dtype=np.float64),
                                                np.ascontiguousarray(mesh.points, dtype=np.float64),
                                                np.ascontiguousarray(boundary, dtype=np.int64))
@@ -148,3 +150,64 @@ def surface_deviation(mesh, geometry, sizing) -> dict:
                                                np.ascontiguousarray(surface.faces, dtype=np.int64))
     return {"input_to_mesh": float(distance.max()), "input_to_mesh_over_h": float(ratio.max()),
             "nodes_off_surface": float(np.sqrt(n2.max()))}
+
+
+CONFORMITY_BAND = (0.7, 1.4)   # edge length / target size counted as conforming
+CONFORMITY_BINS = np.linspace(0.0, 3.0, 61)
+
+
+def size_conformity(mesh, sizing) -> dict:
+    """Edge length over the target size h at the edge's midpoint: median, share in CONFORMITY_BAND,
+    histogram, and the same per winning pattern (by the sizing field's audited evaluation)."""
+    edges = np.unique(np.sort(mesh.tets[:, EDGES].reshape(-1, 2), axis=1), axis=0)
+    a, b = mesh.points[edges[:, 0]], mesh.points[edges[:, 1]]
+    evaluation = sizing.evaluate((a + b) / 2)
+    ratio = np.linalg.norm(b - a, axis=1) / evaluation.h
+    low, high = CONFORMITY_BAND
+
+    def stats(r):
+        return {"edges": int(len(r)), "median": float(np.median(r)) if len(r) else None,
+                "within": float(np.mean((r >= low) & (r <= high))) if len(r) else None}
+
+    by_pattern = {p.id: stats(ratio[evaluation.winner == k]) for k, p in enumerate(sizing.placed)}
+    counts, _ = np.histogram(np.clip(ratio, CONFORMITY_BINS[0], CONFORMITY_BINS[-1]), CONFORMITY_BINS)
+    return {**stats(ratio), "band": [low, high], "by_pattern": by_pattern,
+            "histogram": {"bins": CONFORMITY_BINS.tolist(), "counts": counts.tolist()}}
+
+
+def boundary_report(mesh, geometry, samples: int = 200_000) -> dict:
+    """The mesh's boundary surface checked by pymeshlab against the input surface: triangle quality
+    (inradius / circumradius, normalised), Hausdorff distance both ways (min / mean / max / RMS),
+    topology (two-manifold, boundary edges, components, holes) and area and volume against the input's."""
+    import pymeshlab
+
+    boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
+    used, local = np.unique(boundary, return_inverse=True)
+    meshes = pymeshlab.MeshSet()
+    meshes.add_mesh(pymeshlab.Mesh(mesh.points[used], local.reshape(-1, 3)), "boundary")
+    meshes.add_mesh(pymeshlab.Mesh(np.asarray(geometry.mesh.vertices), np.asarray(geometry.mesh.faces)), "input")
+    meshes.set_current_mesh(0)
+    meshes.compute_scalar_by_aspect_ratio_per_face(metric=1)
+    triangle_quality = meshes.current_mesh().face_scalar_array()
+    topology = meshes.get_topological_measures()
+    measures = meshes.get_geometric_measures()
+    meshes.set_current_mesh(1)
+    reference = meshes.get_geometric_measures()
+
+    def hausdorff(sampled, target):
+        out = meshes.get_hausdorff_distance(sampledmesh=sampled, targetmesh=target, samplevert=True,
+                                            sampleface=True, samplenum=samples)
+        return {key: float(out[key]) for key in ("min", "mean", "max", "RMS")}
+
+    return {
+        "triangles": int(len(boundary)),
+        "triangle_quality": {"min": float(triangle_quality.min()), "median": float(np.median(triangle_quality)),
+                             "below_0.3": int((triangle_quality < 0.3).sum())},
+        "hausdorff_input_to_mesh": hausdorff(1, 0), "hausdorff_mesh_to_input": hausdorff(0, 1),
+        "two_manifold": bool(topology["is_mesh_two_manifold"]),
+        "boundary_edges": int(topology["boundary_edges"]),
+        "components": int(topology["connected_components_number"]),
+        "holes": int(topology["number_holes"]) if topology.get("number_holes", -1) >= 0 else 0,
+        "area": float(measures["surface_area"]), "input_area": float(reference["surface_area"]),
+        "volume": float(measures.get("mesh_volume", np.nan)), "input_volume": float(reference.get("mesh_volume", np.nan)),
+    }

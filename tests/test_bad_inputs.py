@@ -32,7 +32,7 @@ from engine.cli import main
 
 ERROR_PREFIX = "fuzzymesh: error:"
 # lines the pipeline logs at INFO level while it works; anything else on stderr is suspect
-PROGRESS_LINE = re.compile(r"^(geometry|sizing|packing|meshing|quality|audit|output|done)( \([\w-]+\)| (curve|patch|volume))?: ")
+PROGRESS_LINE = re.compile(r"^(geometry|sizing|packing|meshing|quality|boundary|size conformity|audit|output|done)( \([\w-]+\)| (curve|patch|volume))?: ")
 MESH_SUFFIXES = {".vtu", ".msh"}
 SMALL = 2.5  # element size for the cube of side 10 in the cases that must mesh
 

@@ -24,7 +24,7 @@ def written(tmp_root, order):
     folder.mkdir()
     job = folder / "job.yaml"
     job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0,
-                                   "output": {"formats": ["vtu", "msh", "inp"], "order": order}}))
+                                   "output": {"formats": ["vtu", "msh", "inp", "bdf", "med"], "order": order}}))
     assert main(["mesh", str(job), "--quiet"]) == 0
     return folder / "out"
 
@@ -101,8 +101,19 @@ def test_quadratic_tets_have_positive_jacobians_and_curved_boundaries():
 
 def test_quadratic_files_read_back(root):
     out = written(root, 2)
-    for name in ("mesh.vtu", "mesh.msh", "mesh.inp"):
+    for name in ("mesh.vtu", "mesh.msh", "mesh.inp", "mesh.bdf", "mesh.med"):
         data = meshio.read(out / name)
         tets10 = data.cells_dict["tetra10"]
         assert (min_jacobian(data.points, tets10) > 0).all(), name
     assert "triangle6" in meshio.read(out / "mesh.msh").cells_dict
+
+
+def test_nastran_and_med_hold_the_same_mesh(root):
+    out = written(root, 1)
+    vtu = meshio.read(out / "mesh.vtu")
+    for name in ("mesh.bdf", "mesh.med"):
+        other = meshio.read(out / name)
+        assert np.allclose(other.points, vtu.points, rtol=0, atol=1e-7 * np.abs(vtu.points).max())
+        assert np.array_equal(other.cells_dict["tetra"], vtu.cells_dict["tetra"]), name
+    med = meshio.read(out / "mesh.med")
+    assert np.allclose(med.cell_data["h_target"][0], vtu.cell_data["h_target"][0]), "the audit travels in MED"

@@ -182,3 +182,17 @@ def test_an_acute_wedge_meshes_with_a_closed_boundary(tmp_path):
     p = mesh.points[tets]
     volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
     assert (volumes > 0).all() and volumes.sum() == pytest.approx(surface.volume, rel=1e-6)
+
+
+def test_pymeshlab_agrees_the_boundary_is_closed_and_close_to_the_input():
+    from engine.quality import boundary_report
+
+    geometry, features, sizing, _ = packed("l_bracket")
+    mesh = meshed("l_bracket")
+    report = boundary_report(mesh, geometry)
+    assert report["two_manifold"] and report["boundary_edges"] == 0 and report["components"] == 1
+    assert report["volume"] == pytest.approx(geometry.volume, rel=0.005)
+    assert report["area"] == pytest.approx(report["input_area"], rel=0.005)
+    ours = surface_deviation(mesh, geometry, sizing)["input_to_mesh"]
+    assert report["hausdorff_input_to_mesh"]["max"] == pytest.approx(ours, rel=0.2, abs=1e-3 * geometry.scale)
+    assert report["triangle_quality"]["min"] > 0.2

@@ -27,7 +27,7 @@ SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delau
 CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is left out, ...
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
 HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
-DEVIATION = 0.07  # ... and one whose chord strays this x h from its curved patch is too coarse:
+DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 3  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5     # no node is added nearer than this x h to another
 NO_BUBBLE = -1    # the bubble id of a node the mesher adds
@@ -267,6 +267,8 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     point, spacing = point[big], h[big]
     present = np.setdiff1d(np.arange(len(uv)), crowded)
     keep = cKDTree(uv[present]).query(point)[0] > MIN_GAP * spacing
+    if chart.turn is not None:   # an edge across the seam spans the whole strip here: not a border to keep off
+        constraints = constraints[np.abs(np.diff(uv[constraints, 0], axis=1)[:, 0]) < chart.turn / 2]
     keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
                    np.r_[2 * radius, spacing]) - len(uv)] = False
     point, spacing = point[keep], spacing[keep]
