@@ -30,6 +30,7 @@ class FEModel:
     cell_data: dict = field(default_factory=dict)    # per element (the audit)
     point_data: dict = field(default_factory=dict)   # per node (the audit; -1 / 0 on mid-edge nodes)
     legend: dict | None = None                       # the audit legend, written as <name>.audit.json
+    report: dict | None = None                       # the report figures, written as <name>.report.json / .html
 
     @staticmethod
     def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
@@ -200,4 +201,11 @@ def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -
     if model.legend is not None:
         targets.append((Path(directory) / f"{name}.audit.json",
                         lambda tmp: Path(tmp).write_text(json.dumps(model.legend, indent=1))))
+    if model.report is not None and model.legend is not None:
+        from .report import render_html
+
+        page = render_html(model.report, model.legend, model.points, model.tets[:, :4], model.cell_data)
+        targets.append((Path(directory) / f"{name}.report.json",
+                        lambda tmp: Path(tmp).write_text(json.dumps(model.report, indent=1))))
+        targets.append((Path(directory) / f"{name}.report.html", lambda tmp: Path(tmp).write_text(page)))
     return write_all_or_nothing(targets)

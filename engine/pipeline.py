@@ -20,6 +20,7 @@ from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
+from .report import report_summary
 from .quality import boundary_report, size_conformity, tet_quality
 from .shapes import build_shape
 from .sizing import SizingField, bind, check_element_limit
@@ -177,7 +178,8 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
                     conformity=conformity, boundary=boundary)
     if write:
         with stage("output", timings):
-            result.files = write_mesh(fe_model(job, mesh, geometry, features, audit), job.output_dir,
-                                      job.output_name, job.output_formats)
+            model = fe_model(job, mesh, geometry, features, audit)
+            model.report = report_summary(result)
+            result.files = write_mesh(model, job.output_dir, job.output_name, job.output_formats)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result

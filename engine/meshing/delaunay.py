@@ -20,7 +20,7 @@ import numpy as np
 from ..mesh import STEINER, TetMesh
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
-from .improve import gmsh_optimize, min_dihedrals, relocate
+from .improve import FLOOR, gmsh_optimize, min_dihedrals, quality_below, relocate
 from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
@@ -58,7 +58,14 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     before = _worst(points, tets)
     fixed = (level != VOLUME) & (level != STEINER)
     points, tets = gmsh_optimize(points, tets, fixed)
-    points, moves = relocate(points, tets, _slide_directions(level, entity, features), seed)
+    slide = _slide_directions(points, level, entity, geometry, features)
+    points, moves = relocate(points, tets, slide[0], seed)
+    if (quality_below(points, tets, FLOOR)).any():   # last resort: curved-patch nodes slide too
+        before = points
+        points, more = relocate(points, tets, slide[1], seed, target=FLOOR)
+        moves += more
+        slid = np.flatnonzero((level == PATCH) & np.any(points != before, axis=1))
+        points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
     seconds["improve"] = time.perf_counter() - start
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
@@ -77,16 +84,18 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order], bubble)
 
 
-def _slide_directions(level, entity, features) -> np.ndarray:
-    """Per node: NaN (fixed: corners, curves, curved patches), 0 (free: volume), or the plane's normal."""
+def _slide_directions(points, level, entity, geometry, features):
+    """Per node: NaN (fixed), 0 (free: volume and Steiner nodes) or the normal of the plane a patch node
+    slides in; (planar patches only, every patch: curved ones in the plane of the input face the node is on)."""
     slide = np.full((len(level), 3), np.nan)
     slide[(level == VOLUME) | (level == STEINER)] = 0.0
     on_patch = np.flatnonzero(level == PATCH)
-    planar = np.array([p.planar for p in features.patches], dtype=bool)
-    normals = np.array([p.normal for p in features.patches]).reshape(-1, 3)
-    sliding = on_patch[planar[entity[on_patch]]]
-    slide[sliding] = normals[entity[sliding]]
-    return slide
+    planar = np.array([p.planar for p in features.patches], dtype=bool)[entity[on_patch]]
+    _, _, face = geometry.closest_point(points[on_patch])
+    every = slide.copy()
+    every[on_patch] = geometry.mesh.face_normals[face]
+    slide[on_patch[planar]] = every[on_patch[planar]]
+    return slide, every
 
 
 def _worst(points, tets) -> float:

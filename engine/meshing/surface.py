@@ -241,6 +241,9 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     circumradius exceeds HOLE x h (a bubble missing). The point is the circumcentre where it lies in its triangle,
     else the centroid; one per hole, none near a node or the border."""
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
+    if chart.turn is not None:   # a triangle across the seam: its corners within half a turn of the first
+        b, c = (x - np.column_stack([chart.turn * np.round((x[:, 0] - a[:, 0]) / chart.turn), 0 * x[:, 1]])
+                for x in (b, c))
     la, lb, lc = (np.linalg.norm(b - c, axis=1), np.linalg.norm(c - a, axis=1), np.linalg.norm(a - b, axis=1))
     double_area = _cross2(b - a, c - a)
     h = 2 * radius[tri].mean(axis=1)
@@ -265,10 +268,13 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         return np.zeros((0, 2)), np.zeros(0)
     big = big[np.argsort(-badness[big], kind="stable")]
     point, spacing = point[big], h[big]
-    present = np.setdiff1d(np.arange(len(uv)), crowded)
-    keep = cKDTree(uv[present]).query(point)[0] > MIN_GAP * spacing
-    if chart.turn is not None:   # an edge across the seam spans the whole strip here: not a border to keep off
+    present = uv[np.setdiff1d(np.arange(len(uv)), crowded)]
+    if chart.turn is not None:   # back into the turn; nodes across the seam count as neighbours
+        point[:, 0] -= chart.turn * np.round(point[:, 0] / chart.turn)
+        present = np.vstack([present, present + [chart.turn, 0.0], present - [chart.turn, 0.0]])
+        # an edge across the seam spans the whole strip here: not a border to keep off
         constraints = constraints[np.abs(np.diff(uv[constraints, 0], axis=1)[:, 0]) < chart.turn / 2]
+    keep = cKDTree(present).query(point)[0] > MIN_GAP * spacing
     keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
                    np.r_[2 * radius, spacing]) - len(uv)] = False
     point, spacing = point[keep], spacing[keep]
