@@ -75,6 +75,13 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--element", type=int, metavar="N")
     explain.set_defaults(run=_cmd_explain)
 
+    report = commands.add_parser("report", help="rewrite the HTML report of a meshed output folder",
+                                 description="rebuilds <name>.report.html from <name>.vtu, <name>.audit.json "
+                                             "and <name>.report.json in OUT")
+    report.add_argument("out", type=Path, metavar="OUT", help="output folder of 'fuzzymesh mesh'")
+    report.add_argument("--name", default=None, help="base name of the files (default: the one report there)")
+    report.set_defaults(run=_cmd_report)
+
     for noun in ("patterns", "recipes"):
         sub = commands.add_parser(noun, help=f"list or show the {noun} of the knowledge base")
         verbs = sub.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
@@ -152,6 +159,24 @@ def _explain_saved(target: Path, args) -> int:
         print(explain_element(cells, legend, element))
     except IndexError as error:
         raise JobError(str(error), where=str(vtu), fix="give an element number from 0 to the element count - 1") from None
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from .report import write_report
+
+    names = [args.name] if args.name else sorted(p.name[:-len(".report.json")] for p in args.out.glob("*.report.json"))
+    if len(names) != 1:
+        raise JobError("no report here" if not names else f"several reports here: {', '.join(names)}",
+                       where=str(args.out), fix="give the output folder of 'fuzzymesh mesh'"
+                       + ("" if not names else " and --name NAME"))
+    name = names[0]
+    for suffix in (".vtu", ".audit.json", ".report.json"):
+        if not (args.out / f"{name}{suffix}").is_file():
+            raise JobError(f"'{name}{suffix}' is missing", where=str(args.out),
+                           fix="mesh again with 'vtu' among output.formats")
+    for path in write_report(args.out, name):
+        print(f"wrote {path}")
     return 0
 
 

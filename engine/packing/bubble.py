@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..progress import progress
 from ..sizing import NODES_PER_H3, estimate_counts
 from . import CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
@@ -160,56 +161,58 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     neighbours, anchor, h = None, None, None   # set at the first step's rebuild
     checked = state.x.copy()
     frame = None
-    for step in range(1, MAX_STEPS[state.level] + 1):
-        n = len(state.x)
-        if n == 0:
-            return 0
-        if neighbours is None or len(neighbours) != n or step - built >= REBUILD_EVERY or \
-                np.count_nonzero(((state.x - anchor) ** 2).sum(axis=1) > (SKIN * h[:n]) ** 2) > STALE_SHARE * n:
-            order = morton_order(state.x)
-            state.x, state.v, state.entity, state.ids = state.x[order], state.v[order], state.entity[order], \
-                state.ids[order]
-            checked, frame = checked[order], None
-            everything = np.concatenate([state.x, state.frozen])
-            h = sizing(everything)   # bubbles move < SKIN h between rebuilds: their diameters are kept till then
-            neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
-        if frame is None or len(frame) != n:
-            _, frame = constraint.frame(state.x, state.entity)
-
-        def acceleration(x, v):
-            f = STIFFNESS * forces(np.concatenate([x, state.frozen]), h, neighbours, n)
-            return (constraint.tangential(f, frame) - damping * v) / MASS
-
-        x0, v0 = state.x, state.v
-        k1x, k1v = v0, acceleration(x0, v0)
-        k2x, k2v = v0 + 0.5 * TIME_STEP * k1v, acceleration(x0 + 0.5 * TIME_STEP * k1x, v0 + 0.5 * TIME_STEP * k1v)
-        k3x, k3v = v0 + 0.5 * TIME_STEP * k2v, acceleration(x0 + 0.5 * TIME_STEP * k2x, v0 + 0.5 * TIME_STEP * k2v)
-        k4x, k4v = v0 + TIME_STEP * k3v, acceleration(x0 + TIME_STEP * k3x, v0 + TIME_STEP * k3v)
-        x1 = x0 + TIME_STEP / 6.0 * (k1x + 2 * k2x + 2 * k3x + k4x)
-        v1 = v0 + TIME_STEP / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
-        x1, frame = constraint.frame(x1, state.entity)
-        v1 = constraint.tangential(v1, frame) if frame is not None else v1
-        moved = np.linalg.norm(x1 - x0, axis=1) / h[:n]
-        state.x, state.v = x1, v1
-        if state.level == VOLUME and step % INSIDE_CHECK_EVERY == 0:
-            escaped = ~geometry.contains(state.x)
-            state.x[escaped], state.v[escaped] = checked[escaped], 0.0
-            checked = state.x.copy()
-        changed = False
-        if step % interval == 0 and step // interval <= rounds:
-            keep = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours)
-            changed = keep is not None
-            if changed:
+    with progress(MAX_STEPS[state.level], f"packing {LEVELS[state.level]}") as bar:
+        for step in range(1, MAX_STEPS[state.level] + 1):
+            n = len(state.x)
+            bar.update()
+            if n == 0:
+                return 0
+            if neighbours is None or len(neighbours) != n or step - built >= REBUILD_EVERY or \
+                    np.count_nonzero(((state.x - anchor) ** 2).sum(axis=1) > (SKIN * h[:n]) ** 2) > STALE_SHARE * n:
+                order = morton_order(state.x)
+                state.x, state.v, state.entity, state.ids = state.x[order], state.v[order], state.entity[order], \
+                    state.ids[order]
+                checked, frame = checked[order], None
                 everything = np.concatenate([state.x, state.frozen])
-                neighbours = update_neighbours(neighbours, keep, everything, len(state.x), k)
-                fresh = len(state.x) - int(keep.sum())
-                anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh:]])
-                h = sizing(everything)
-                frame = None
-                # survivors keep their last verified place; new bubbles were placed inside
-                checked = np.concatenate([checked[keep], state.x[len(state.x) - fresh:]])
-        if not changed and step > interval * rounds and moved.max() < TOLERANCE:
-            break
+                h = sizing(everything)   # bubbles move < SKIN h between rebuilds: their diameters are kept till then
+                neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
+            if frame is None or len(frame) != n:
+                _, frame = constraint.frame(state.x, state.entity)
+
+            def acceleration(x, v):
+                f = STIFFNESS * forces(np.concatenate([x, state.frozen]), h, neighbours, n)
+                return (constraint.tangential(f, frame) - damping * v) / MASS
+
+            x0, v0 = state.x, state.v
+            k1x, k1v = v0, acceleration(x0, v0)
+            k2x, k2v = v0 + 0.5 * TIME_STEP * k1v, acceleration(x0 + 0.5 * TIME_STEP * k1x, v0 + 0.5 * TIME_STEP * k1v)
+            k3x, k3v = v0 + 0.5 * TIME_STEP * k2v, acceleration(x0 + 0.5 * TIME_STEP * k2x, v0 + 0.5 * TIME_STEP * k2v)
+            k4x, k4v = v0 + TIME_STEP * k3v, acceleration(x0 + TIME_STEP * k3x, v0 + TIME_STEP * k3v)
+            x1 = x0 + TIME_STEP / 6.0 * (k1x + 2 * k2x + 2 * k3x + k4x)
+            v1 = v0 + TIME_STEP / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+            x1, frame = constraint.frame(x1, state.entity)
+            v1 = constraint.tangential(v1, frame) if frame is not None else v1
+            moved = np.linalg.norm(x1 - x0, axis=1) / h[:n]
+            state.x, state.v = x1, v1
+            if state.level == VOLUME and step % INSIDE_CHECK_EVERY == 0:
+                escaped = ~geometry.contains(state.x)
+                state.x[escaped], state.v[escaped] = checked[escaped], 0.0
+                checked = state.x.copy()
+            changed = False
+            if step % interval == 0 and step // interval <= rounds:
+                keep = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours)
+                changed = keep is not None
+                if changed:
+                    everything = np.concatenate([state.x, state.frozen])
+                    neighbours = update_neighbours(neighbours, keep, everything, len(state.x), k)
+                    fresh = len(state.x) - int(keep.sum())
+                    anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh:]])
+                    h = sizing(everything)
+                    frame = None
+                    # survivors keep their last verified place; new bubbles were placed inside
+                    checked = np.concatenate([checked[keep], state.x[len(state.x) - fresh:]])
+            if not changed and step > interval * rounds and moved.max() < TOLERANCE:
+                break
     if state.level == VOLUME:
         escaped = ~geometry.contains(state.x)
         state.x[escaped] = checked[escaped]
