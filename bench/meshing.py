@@ -17,11 +17,9 @@ import resource
 import statistics
 import time
 
-from engine.job import job_from_dict
-from engine.knowledge import load_knowledge
+from cases import junction_edge
 from engine.meshing import get_mesher
 from engine.packing import get_packer
-from engine.pipeline import build_geometry, build_sizing
 from engine.quality import surface_deviation, tet_quality
 
 
@@ -47,11 +45,7 @@ def main() -> None:
     parser.add_argument("--qhull", action="store_true")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    kb = load_knowledge()
-    job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": args.size,
-                         "recipe": "junction-edge"})
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, kb)
+    kb, geometry, features, sizing = junction_edge(args.size)
     packing = get_packer("bubble")(geometry, features, sizing, seed=0, knowledge=kb)
     print(f"junction-edge, size {args.size}: {len(packing):,} bubbles")
     runs = []

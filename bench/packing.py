@@ -15,10 +15,8 @@ import resource
 import statistics
 import time
 
-from engine.job import job_from_dict
-from engine.knowledge import load_knowledge
+from cases import junction_edge
 from engine.packing import get_packer
-from engine.pipeline import build_geometry, build_sizing
 
 
 def main() -> None:
@@ -27,11 +25,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    kb = load_knowledge()
-    job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": args.size,
-                         "recipe": "junction-edge"})
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, kb)
+    kb, geometry, features, sizing = junction_edge(args.size)
     runs = []
     for _ in range(args.repeats):
         start = time.perf_counter()

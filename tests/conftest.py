@@ -21,3 +21,19 @@ def shape_and_features(kind: str, **parameters):
 @pytest.fixture
 def built():
     return shape_and_features
+
+
+@pytest.fixture(scope="session")
+def junction_run(tmp_path_factory):
+    """The junction near the plate edge meshed through a job file (recipe junction-edge, size 12, VTU):
+    (output folder, pipeline result)."""
+    import yaml
+
+    from engine.job import load_job
+    from engine.pipeline import run
+
+    folder = tmp_path_factory.mktemp("junction")
+    job = folder / "job.yaml"
+    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge",
+                                   "size": 12.0, "output": {"formats": ["vtu"]}}))
+    return folder / "out", run(load_job(job))

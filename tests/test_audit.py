@@ -8,21 +8,14 @@ from pathlib import Path
 import meshio
 import numpy as np
 import pytest
-import yaml
 
 from engine.cli import main
-from engine.job import load_job
-from engine.pipeline import run
 
 
 @pytest.fixture(scope="module")
-def junction(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("audit")
-    job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge",
-                                   "size": 12.0, "output": {"formats": ["vtu"]}}))
-    result = run(load_job(job))
-    return folder, result
+def junction(junction_run):
+    out, result = junction_run
+    return out.parent, result
 
 
 def test_recomputed_sizing_reproduces_the_audit_of_1000_random_elements(junction):

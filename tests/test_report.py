@@ -10,22 +10,15 @@ import subprocess
 
 import numpy as np
 import pytest
-import yaml
 
 from engine.cli import main
-from engine.job import load_job
-from engine.pipeline import run
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
-def meshed(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("report")
-    job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge",
-                                   "size": 14.0, "output": {"formats": ["vtu"]}}))
-    return folder / "out", run(load_job(job))
+def meshed(junction_run):
+    return junction_run
 
 
 def test_report_json_holds_the_run_figures(meshed):
