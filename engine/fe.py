@@ -111,13 +111,13 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     straight = mesh.points[unique].mean(axis=1)
     curved = straight.copy()
     boundary_edges = np.unique(np.sort(mesh.boundary[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1), axis=0)
-    on_boundary = _rows_in(unique, boundary_edges)
+    on_boundary = row_index(boundary_edges, unique) >= 0
     if on_boundary.any():
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
     chords, curve = curve_edges(mesh, features)
-    on_curve = _rows_in(unique, np.sort(chords, axis=1), index=True)
+    chord_row = row_index(unique, np.sort(chords, axis=1))
     for c in np.unique(curve):
-        rows = on_curve[0][curve[on_curve[1]] == c]
+        rows = chord_row[(curve == c) & (chord_row >= 0)]
         curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
     tets10 = np.hstack([mesh.tets, len(mesh.points) + inverse.reshape(-1, 6)])
     for attempt in range(CURVING_ATTEMPTS + 1):   # halve the curving of elements that would fold
@@ -131,24 +131,27 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     return points, tets10, triangles6
 
 
-def _rows_in(rows: np.ndarray, table: np.ndarray, index: bool = False):
-    """Mask of ``rows`` (sorted node pairs) found in ``table``; with ``index``, (row, table row) pairs."""
-    n = int(max(rows.max(initial=0), table.max(initial=0))) + 1
-    keys, table_keys = rows[:, 0] * n + rows[:, 1], table[:, 0] * n + table[:, 1]
-    if not index:
-        return np.isin(keys, table_keys)
-    order = np.argsort(keys)
-    at = np.clip(np.searchsorted(keys[order], table_keys), 0, max(len(keys) - 1, 0))
-    found = keys[order][at] == table_keys
-    return order[at[found]], np.flatnonzero(found)
+def row_index(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Index into ``table`` of each of ``rows`` (node tuples, each sorted the same way), -1 where absent."""
+    if len(table) == 0 or len(rows) == 0:
+        return np.full(len(rows), -1, np.int64)
+    n = int(max(table.max(), rows.max())) + 1
+
+    def key(a):
+        k = np.zeros(len(a), np.int64)
+        for column in a.T:
+            k = k * n + column
+        return k
+
+    table_keys = key(table)
+    order = np.argsort(table_keys)
+    at = np.clip(np.searchsorted(table_keys[order], key(rows)), 0, len(table) - 1)
+    return np.where(table_keys[order][at] == key(rows), order[at], -1)
 
 
 def _boundary_triangle6(triangles, unique_edges, offset) -> np.ndarray:
     edges = np.sort(triangles[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1)
-    n = int(unique_edges.max(initial=0)) + 1
-    keys = unique_edges[:, 0] * n + unique_edges[:, 1]
-    mid = offset + np.searchsorted(keys, edges[:, 0] * n + edges[:, 1])
-    return np.hstack([triangles, mid.reshape(-1, 3)])
+    return np.hstack([triangles, offset + row_index(unique_edges, edges).reshape(-1, 3)])
 
 
 # shape-function gradients of the 10-node tet at a point (r, s, t), VTK order

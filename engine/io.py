@@ -11,6 +11,7 @@ import meshio
 import numpy as np
 
 from .errors import FuzzymeshError
+from .fe import TET10_EDGES, row_index
 from .mesh import TetMesh
 from .meshing.tetra import face_owners
 
@@ -84,25 +85,12 @@ def _group_cells(model: FEModel, group) -> np.ndarray:
     if not model.quadratic or group.dim == 0:
         return group.cells
     if group.dim == 2:
-        rows = _match_rows(np.sort(model.boundary[:, :3], axis=1), np.sort(group.cells, axis=1))
+        rows = row_index(np.sort(model.boundary[:, :3], axis=1), np.sort(group.cells, axis=1))
         return model.boundary[rows]
-    edges = np.sort(model.tets[:, [[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]]].reshape(-1, 2), axis=1)
+    edges = np.sort(model.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
     middle = model.tets[:, 4:].reshape(-1)
-    rows = _match_rows(edges, np.sort(group.cells, axis=1))
+    rows = row_index(edges, np.sort(group.cells, axis=1))
     return np.column_stack([group.cells, middle[rows]])
-
-
-def _match_rows(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Index into ``table`` of each of ``rows`` (all present)."""
-    n = int(max(table.max(initial=0), rows.max(initial=0))) + 1
-    def key(a):
-        k = np.zeros(len(a), np.int64)
-        for column in a.T:
-            k = k * n + column
-        return k
-    table_keys = key(table)
-    order = np.argsort(table_keys)
-    return order[np.searchsorted(table_keys[order], key(rows))]
 
 
 def write_abaqus(path, model: FEModel) -> None:

@@ -5,6 +5,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])   # face k is opposite vertex k, outward
+
+
+def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Volume of each tet, positive for positively oriented ones."""
+    p = points[tets]
+    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+
+
 NODE_LEVELS = ("corner", "curve", "patch", "volume", "steiner")   # the packing's levels, then mesher-added nodes
 STEINER = 4
 
@@ -30,8 +39,7 @@ class TetMesh:
     node_bubble: np.ndarray | None = None   # (n,) the packing's bubble id of each node, -1 for added nodes
 
     def volumes(self) -> np.ndarray:
-        p = self.points[self.tets]
-        return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+        return signed_volumes(self.points, self.tets)
 
     @property
     def volume(self) -> float:
@@ -39,6 +47,6 @@ class TetMesh:
 
     def boundary_faces(self) -> np.ndarray:
         """The faces used by one tetrahedron only, outward: the mesh's actual boundary."""
-        faces = self.tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3)
+        faces = self.tets[:, FACES].reshape(-1, 3)
         _, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
         return faces[np.sort(index[counts == 1])]

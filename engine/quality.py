@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._numba import numba
+from .mesh import FACES   # face k is opposite vertex k
 
-FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])   # face k is opposite vertex k
 EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 # the two faces meeting at edge e are the faces opposite the edge's two other vertices
 OPPOSITE = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]])

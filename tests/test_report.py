@@ -30,6 +30,7 @@ def test_report_json_holds_the_run_figures(meshed):
     assert sum(summary["size_conformity"]["histogram"]["counts"]) == summary["size_conformity"]["edges"]
     assert summary["boundary"]["two_manifold"] and summary["boundary"]["boundary_edges"] == 0
     assert set(summary["timings"]) >= {"geometry", "sizing", "packing", "meshing", "quality", "audit"}
+    assert isinstance(summary["mesher"]["min_dihedral_before_improvement"], float)
 
 
 def test_html_is_self_contained_and_regenerated_from_the_saved_files(meshed, capsys):

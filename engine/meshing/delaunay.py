@@ -61,10 +61,10 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     slide = _slide_directions(points, level, entity, geometry, features)
     points, moves = relocate(points, tets, slide[0], seed)
     if (quality_below(points, tets, FLOOR)).any():   # last resort: curved-patch nodes slide too
-        before = points
+        unslid = points
         points, more = relocate(points, tets, slide[1], seed, target=FLOOR)
         moves += more
-        slid = np.flatnonzero((level == PATCH) & np.any(points != before, axis=1))
+        slid = np.flatnonzero((level == PATCH) & np.any(points != unslid, axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
     seconds["improve"] = time.perf_counter() - start
 
@@ -77,9 +77,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
              "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
              "min_dihedral_before_improvement": before, "relocated_nodes": moves,
              "seconds": {k: round(v, 3) for k, v in seconds.items()}}
-    log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement: "
-             "min dihedral %.2f -> %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
-             len(tets), len(steiner), seconds["connect"], before, _worst(points, tets), moves, seconds["improve"])
+    log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement from "
+              "min dihedral %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
+              len(tets), len(steiner), seconds["connect"], before, moves, seconds["improve"])
     order = np.argsort(surface.patch, kind="stable")
     return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order], bubble)
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import numba
-from .tetra import gmsh_session
+from .tetra import gmsh_session, node_stars
 
 GMSH_THRESHOLD = 0.3        # Gmsh optimises tets with gamma below this
 TARGET_DIHEDRAL = 14.0      # degrees: relocation works on tets whose minimum dihedral is below,
@@ -83,9 +83,7 @@ def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int 
     points = np.ascontiguousarray(points, dtype=np.float64).copy()
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     slide = np.ascontiguousarray(slide, dtype=np.float64)
-    order = np.argsort(tets.ravel(), kind="stable")
-    star_start = np.searchsorted(tets.ravel()[order], np.arange(len(points) + 1))
-    star_tets = (order // 4).astype(np.int64)
+    star_start, star_tets = node_stars(tets, len(points))
     directions = np.random.default_rng(seed).normal(size=(CANDIDATES, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     movable = ~np.isnan(slide[:, 0])

@@ -8,7 +8,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from .._numba import numba
-from ..quality import FACES
+from ..mesh import FACES, signed_volumes
 
 FLAT = 1e-10   # |6 x volume| below this x (edge length)^3: a flat tetrahedron
 
@@ -51,11 +51,6 @@ def tetrahedralize(points: np.ndarray, triangles: np.ndarray | None = None) -> t
     with quiet_stdout():   # HXT prints "Info : Recover Delaunay" whatever the verbosity
         tets, steiner = gmsh.algorithm.tetrahedralize(np.ascontiguousarray(points, dtype=float).ravel(), faces)
     return np.asarray(tets, dtype=np.int64).reshape(-1, 4) - 1, np.asarray(steiner, dtype=float).reshape(-1, 3)
-
-
-def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    p = points[tets]
-    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
 
 
 def orient(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
