@@ -9,8 +9,12 @@ Runge-Kutta method (forces re-evaluated at every stage), 70 % of critical
 damping. Every ``control_interval`` steps the population rules of
 ``knowledge/population.yaml`` delete strongly overlapping bubbles and add
 bubbles next to open ones; each event is logged with its rule and firing
-degree. A level ends when the largest step is below TOLERANCE x h, or at
-MAX_STEPS.
+degree. After the last round a level settles for SETTLE_STEPS more steps,
+or less when the largest step falls below TOLERANCE x h. The settling is
+short on purpose: the rounds leave the bubbles near equilibrium, and without
+population control a longer run lets the attractive tail of the force pull
+bubbles together (the share at 0.85-1.15 r0 went from 99.6 % after 8 settling
+steps to 97.7 % after 42 on the junction).
 """
 from __future__ import annotations
 
@@ -33,12 +37,13 @@ log = logging.getLogger(__name__)
 MASS = 1.0
 STIFFNESS = 1.0                  # k0, per unit of r0
 DAMPING_RATIO = 0.7              # of critical damping 2 sqrt(m k0)
-TIME_STEP = 0.25                 # in units of sqrt(m / k0); RK4 is stable well beyond the stiffest pair
-MAX_STEPS = {CURVE: 130, PATCH: 130, VOLUME: 130}
+TIME_STEP = 0.5                  # in units of sqrt(m / k0): |lambda| dt <= 1.7 for a bubble pressed by all
+                                 # its neighbours at the stiffest spacing, inside RK4's stability bound 2.78
+SETTLE_STEPS = 8                 # steps after the last population-control round
 TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
-NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 20}
+NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 16}
 SKIN = 0.3                       # a bubble that moved this x h since the last build is stale
-STALE_SHARE = 1e-2               # rebuild the neighbour lists once this share of bubbles is stale
+STALE_SHARE = 0.05               # rebuild the neighbour lists once this share of bubbles is stale
 REBUILD_EVERY = 50               # ... or after this many steps
 INSIDE_CHECK_EVERY = 5           # volume bubbles outside the solid go back to their last checked place
 
@@ -161,8 +166,9 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     neighbours, anchor, h = None, None, None   # set at the first step's rebuild
     checked = state.x.copy()
     frame = None
-    with progress(MAX_STEPS[state.level], f"packing {LEVELS[state.level]}") as bar:
-        for step in range(1, MAX_STEPS[state.level] + 1):
+    last_step = interval * rounds + SETTLE_STEPS
+    with progress(last_step, f"packing {LEVELS[state.level]}") as bar:
+        for step in range(1, last_step + 1):
             n = len(state.x)
             bar.update()
             if n == 0:
