@@ -67,7 +67,7 @@ def markdown(results: dict) -> str:
         "from the rules and the element-count guard included); Gmsh " + " + ".join(GMSH_STAGES)
         + " (HXT optimises inside its volume stage). Process start-up (imports, Gmsh initialisation) and "
         "fuzzymesh's analysis stages (" + ", ".join(ANALYSIS) + ") are listed apart. *Peak* is the worker's "
-        "resident-memory high-water mark at the end of meshing (ru_maxrss, Python and imports included). Quality and "
+        "resident-memory high-water mark at the end of meshing (VmHWM, Python and imports included). Quality and "
         "size conformity (edge length / h at the edge's midpoint, share within the band) come from "
         "`engine.quality` on every mesh, whoever made it.",
         "",

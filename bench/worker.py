@@ -20,7 +20,19 @@ STARTED = time.perf_counter()
 
 
 def peak_mb() -> float:
-    """This process's resident-memory high-water mark so far, in MB (ru_maxrss: KB on Linux, bytes on macOS)."""
+    """This process's resident-memory high-water mark so far, in MB.
+
+    On Linux VmHWM of /proc/self/status: ru_maxrss (of the process, or RUSAGE_CHILDREN in the parent) starts
+    from the parent's resident size at the fork that started this process, which exec does not reset (a
+    worker doing nothing reports the harness's 300 MB). Elsewhere ru_maxrss (KB; bytes on macOS).
+    """
+    try:
+        with open("/proc/self/status") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / 2**20 if sys.platform == "darwin" else peak / 1024
 
