@@ -25,7 +25,7 @@ log = logging.getLogger("bench")
 
 WORKER = Path(__file__).with_name("worker.py")
 # every worker runs under the same OpenMP runtime behaviour: threads that wait sleep instead of spinning
-# (on a shared machine, spinning made HXT 70x and the packer 5x slower); a value already set is kept
+# (on the loaded shared machine, spinning made HXT's volume stage 100x and the packer 5x slower); a value already set is kept
 OMP_WAIT_POLICY = os.environ.get("OMP_WAIT_POLICY", "PASSIVE")
 MESHERS = ("fuzzymesh", "gmsh-delaunay", "gmsh-hxt")
 # the stages that turn the solid and the sizes into a mesh; the rest of fuzzymesh's pipeline (quality,
