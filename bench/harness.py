@@ -24,8 +24,8 @@ from worker import grid_digest
 log = logging.getLogger("bench")
 
 WORKER = Path(__file__).with_name("worker.py")
-# every worker runs under the same OpenMP runtime behaviour: threads that wait sleep instead of spinning
-# (on the loaded shared machine, spinning made HXT's volume stage 100x and the packer 5x slower); a value already set is kept
+# every worker runs under the same OpenMP runtime behaviour: threads that wait sleep instead of spinning (on
+# the loaded shared machine, spinning made HXT's volume stage 100x and the packer 5x slower); a set value is kept
 OMP_WAIT_POLICY = os.environ.get("OMP_WAIT_POLICY", "PASSIVE")
 MESHERS = ("fuzzymesh", "gmsh-delaunay", "gmsh-hxt")
 # the stages that turn the solid and the sizes into a mesh; the rest of fuzzymesh's pipeline (quality,
@@ -64,7 +64,8 @@ def mesh_figures(path: Path, sizing, solid_volume: float) -> dict:
     conformity = size_conformity(SimpleNamespace(points=points, tets=tets), sizing)
     return {"nodes": len(points), "tets": len(tets),
             "min_dihedral": quality["min_dihedral"]["min"], "p01_dihedral": quality["min_dihedral"]["p01"],
-            "median_dihedral": quality["min_dihedral"]["median"], "below_10_degrees": quality["below"]["min_dihedral_10"],
+            "median_dihedral": quality["min_dihedral"]["median"],
+            "below_10_degrees": quality["below"]["min_dihedral_10"],
             "max_dihedral": quality["max_dihedral"]["max"],
             "min_radius_ratio": quality["radius_ratio"]["min"], "p01_radius_ratio": quality["radius_ratio"]["p01"],
             "conformity_median": conformity["median"], "conformity_within": conformity["within"],

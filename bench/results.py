@@ -82,7 +82,8 @@ def markdown(results: dict) -> str:
                 lines.append(f"| {row['case']} | {row['tier']} | {mesher} | failed: {e['error']} |" + " |" * 12)
                 continue
             lines.append(
-                f"| {row['case']} | {row['tier']} | {mesher} | {e['tets']:,} | {e['nodes']:,} | {_f(e['mesh_seconds'])} "
+                f"| {row['case']} | {row['tier']} | {mesher} | {e['tets']:,} | {e['nodes']:,} "
+                f"| {_f(e['mesh_seconds'])} "
                 f"| {_f(e['peak_mb'], 0)} | {_f(e['cpu_seconds'])} | {_f(e['min_dihedral'])} | {_f(e['p01_dihedral'])} "
                 f"| {e['below_10_degrees']:,} | {_f(e['min_radius_ratio'], 3)} | {_f(e['p01_radius_ratio'], 3)} "
                 f"| {_f(e['conformity_median'], 3)} | {100 * e['conformity_within']:.1f} % "
@@ -99,8 +100,8 @@ def markdown(results: dict) -> str:
                                                              "min_dihedral", "p01_dihedral", "min_radius_ratio",
                                                              "p01_radius_ratio", "conformity_within")) + " |")
     lines += ["", "### Sizes", "",
-              "| case | tier | scale | H | h min–max | size grid | Gmsh asks for our h: curve points, largest relative "
-              "difference | fuzzymesh used the same grid |",
+              "| case | tier | scale | H | h min–max | size grid | Gmsh asks for our h: curve points, largest "
+              "relative difference | fuzzymesh used the same grid |",
               "|---|---|---:|---:|---|---|---|---|"]
     for row in results["rows"]:
         field = row["size_field"]

@@ -43,7 +43,8 @@ def missing_requirement() -> str | None:
         gmsh.finalize()
     lacking = [name for name in ("OpenCASCADE", "Hxt") if name not in options]
     if lacking:
-        return f"this Gmsh ({gmsh.__version__}) is built without {' and '.join(lacking)}; install the pip wheel: pip install gmsh"
+        return (f"this Gmsh ({gmsh.__version__}) is built without {' and '.join(lacking)}; "
+                "install the pip wheel: pip install gmsh")
     return None
 
 
