@@ -17,6 +17,7 @@ import argparse
 import importlib.util
 import json
 import logging
+import os
 import shlex
 import sys
 import tempfile
@@ -103,6 +104,7 @@ def main(argv=None) -> int:
             for tier, scale in rows:
                 results["rows"].append(measure_case(case, tier, scale, args.meshers, args.repeats, Path(folder)))
     results["seconds"] = time.perf_counter() - begin
+    results["machine"]["load_average_end"] = list(os.getloadavg())
     results["scaling"] = scaling(results)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.plot:
