@@ -1,0 +1,100 @@
+"""Where the time of a small ``fuzzymesh mesh`` goes: the paper's scale, the junction near the plate edge at
+the uniform size 9.3 (about 6,900 tetrahedra; the paper's mesh has 6,896).
+
+    python bench/profile_small.py [--size 9.3] [--repeats 3] [--profile]
+
+Runs what ``fuzzymesh mesh --size SIZE`` runs (imports, the pipeline, the files: VTU, MSH, audit, report),
+each time in a fresh process, and prints the medians of the wall time, of the imports and of every pipeline
+stage. ``--profile`` adds one run under cProfile and the cumulative time of what the profile showed to matter
+(imports, numba loading or compiling its kernels, Gmsh, pymeshlab, matplotlib, the file writers), which
+overlap (an import inside the report counts for both).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+# (label, file suffix, function) of the profile entries whose cumulative time is reported
+ENTRIES = [
+    ("imports (wherever they happen)", "<frozen importlib._bootstrap>", "_find_and_load"),
+    ("numba: load cached kernels or compile", "numba/core/dispatcher.py", "_compile_for_args"),
+    ("packing: force kernel", "engine/packing/forces.py", "forces"),
+    ("sizing: element-count estimate", "engine/sizing.py", "estimate_counts"),
+    ("meshing: Gmsh constrained Delaunay", "engine/meshing/tetra.py", "tetrahedralize"),
+    ("meshing: Gmsh optimiser", "engine/meshing/improve.py", "gmsh_optimize"),
+    ("boundary: pymeshlab report", "engine/quality.py", "boundary_report"),
+    ("output: report HTML (matplotlib)", "engine/report.py", "render_html"),
+    ("output: all files", "engine/io.py", "write_mesh"),
+]
+
+
+def once(size: float, profile: str | None) -> dict:
+    """One run in this process: seconds of the imports, of every stage and of the whole."""
+    import cProfile
+    import dataclasses
+    import logging
+
+    logging.basicConfig(level=logging.WARNING)
+    profiler = cProfile.Profile() if profile else None
+    if profiler:
+        profiler.enable()
+    begin = time.perf_counter()
+    from engine.job import default_job
+    from engine.pipeline import run
+    imports = time.perf_counter() - begin
+    with tempfile.TemporaryDirectory() as out:
+        result = run(dataclasses.replace(default_job(), size=size, output_dir=out))
+    wall = time.perf_counter() - begin
+    if profiler:
+        profiler.disable()
+        profiler.dump_stats(profile)
+    return {"wall": wall, "imports": imports, "stages": result.timings, "tets": len(result.mesh.tets)}
+
+
+def entries(path: str) -> list[tuple[str, float]]:
+    import pstats
+
+    stats = pstats.Stats(path).stats   # (file, line, function) -> (calls, primitive calls, total, cumulative, callers)
+    return [(label, sum(value[3] for (file, _, function), value in stats.items()
+                        if file.endswith(suffix) and function == name)) for label, suffix, name in ENTRIES]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", type=float, default=9.3)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--once", metavar="PROFILE_PATH", nargs="?", const="", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.once is not None:
+        print(json.dumps(once(args.size, args.once or None)))
+        return
+
+    def fresh(profile=""):
+        done = subprocess.run([sys.executable, __file__, "--size", str(args.size), "--once", profile],
+                              capture_output=True, text=True, check=True)
+        return json.loads(done.stdout.splitlines()[-1])
+
+    runs = [fresh() for _ in range(args.repeats)]
+    median = statistics.median
+    print(f"fuzzymesh mesh --size {args.size}: {runs[0]['tets']:,} tets; medians of {args.repeats} fresh processes")
+    walls = [r["wall"] for r in runs]
+    print(f"  whole run {median(walls):.2f} s (runs: {', '.join(f'{w:.2f}' for w in walls)})")
+    print(f"  imports of engine.pipeline {median(r['imports'] for r in runs):.2f} s")
+    for stage in runs[0]["stages"]:
+        print(f"  {stage:12s} {median(r['stages'][stage] for r in runs):6.2f} s")
+    if args.profile:
+        with tempfile.NamedTemporaryFile(suffix=".prof") as file:
+            profiled = fresh(file.name)
+            print(f"one run under cProfile: {profiled['wall']:.2f} s; cumulative (overlapping):")
+            for label, seconds in entries(file.name):
+                print(f"  {label:40s} {seconds:6.2f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""The benchmark harness (bench/run.py) on a tiny case, so it does not rot: it runs every mesher, writes
+every figure, Gmsh sees our sizes, and the ratios are the ratios of the figures."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+sys.path.insert(0, str(BENCH))   # the bench scripts import each other as top-level modules
+
+from harness import FIGURES, MESH_STAGES  # noqa: E402
+
+MESHERS = ("fuzzymesh", "gmsh-delaunay", "gmsh-hxt")
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """bench/run.py on the junction at the plate centre with every size x 8 (about 2k tets), one run each."""
+    out = tmp_path_factory.mktemp("bench")
+    done = subprocess.run([sys.executable, str(BENCH / "run.py"), "--cases", "junction-centre", "--scale", "8",
+                           "--repeats", "1", "--no-warm-up", "--out", str(out)],
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_every_mesher_measured(tiny):
+    _, results = tiny
+    machine = {"cpu", "cores", "memory_gb", "date", "python", "numpy", "gmsh", "omp_wait_policy"}
+    assert machine <= set(results["machine"])
+    (row,) = results["rows"]
+    assert row["case"] == "junction-centre" and row["scale"] == 8
+    assert set(row["meshers"]) == set(MESHERS)
+    for name, entry in row["meshers"].items():
+        assert "error" not in entry, entry
+        assert set(MESH_STAGES[name]) <= set(entry["seconds"])
+        assert math.isclose(entry["mesh_seconds"], sum(entry["seconds"][s] for s in MESH_STAGES[name]), rel_tol=1e-9)
+        for key in FIGURES:
+            assert entry[key] > 0, (name, key)
+        assert 500 < entry["tets"] < 10_000 and entry["nodes"] < entry["tets"]
+        assert entry["peak_mb"] >= entry["start_mb"] > 10
+        assert 0 < entry["min_dihedral"] <= entry["p01_dihedral"] < 70.6
+        assert 0 < entry["conformity_within"] <= 1 and entry["inverted"] == 0
+        assert abs(entry["volume_error"]) < 0.02   # h ~ 13 chords on the r = 25 cylinder
+    fuzzymesh = row["meshers"]["fuzzymesh"]
+    assert {"packing", "meshing", "quality", "audit"} <= set(fuzzymesh["seconds"])
+    assert fuzzymesh["peak_mb_pipeline"] >= fuzzymesh["peak_mb"]
+
+
+def test_ratios_are_the_figures_ratios(tiny):
+    _, results = tiny
+    (row,) = results["rows"]
+    ours = row["meshers"]["fuzzymesh"]
+    assert set(row["ratios"]) == {"gmsh-delaunay", "gmsh-hxt"}
+    for against, ratios in row["ratios"].items():
+        theirs = row["meshers"][against]
+        for key in FIGURES:
+            assert math.isclose(ratios[key], ours[key] / theirs[key], rel_tol=1e-12), (against, key)
+
+
+def test_gmsh_meshes_our_sizes(tiny):
+    """The same grid in the fuzzymesh worker as in the harness, and Gmsh asks for our h(x) along every curve."""
+    _, results = tiny
+    field = results["rows"][0]["size_field"]
+    assert field["same_as_fuzzymesh"] is True
+    assert field["gmsh_probe"]["samples"] > 100
+    assert field["gmsh_probe"]["max_relative_difference"] < 1e-9
+
+
+def test_tables_and_plot(tiny):
+    out, results = tiny
+    text = (out / "results.md").read_text()
+    assert results["machine"]["date"] in text
+    for name in MESHERS:
+        assert f"| junction-centre | x8 | {name} | {results['rows'][0]['meshers'][name]['tets']:,} |" in text
+    assert "| junction-centre | x8 | gmsh-hxt | " in text.split("### fuzzymesh / Gmsh")[1]
+    assert (out / "scaling.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [r["mesher"] for r in results["scaling"]] == list(MESHERS)
+
+
+def test_missing_gmsh_is_one_line(monkeypatch):
+    import importlib.util
+
+    import run
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "gmsh" else real(name, *a))
+    assert run.missing_requirement() == "'gmsh' is not installed; install the bench extra: pip install \".[bench]\""
