@@ -196,3 +196,25 @@ def test_pymeshlab_agrees_the_boundary_is_closed_and_close_to_the_input():
     ours = surface_deviation(mesh, geometry, sizing)["input_to_mesh"]
     assert report["hausdorff_input_to_mesh"]["max"] == pytest.approx(ours, rel=0.2, abs=1e-3 * geometry.scale)
     assert report["triangle_quality"]["min"] > 0.2
+
+
+def test_a_flat_tet_between_two_boundary_faces_is_peeled():
+    """A sliver lying on a pyramid (its lower faces shared, its upper two on the boundary) goes; the
+    boundary becomes its lower faces, outward, and still equals the free faces of the tets."""
+    from engine.mesh import TetMesh
+    from engine.meshing.improve import FLOOR, peel_boundary_slivers
+    from engine.meshing.tetra import orient
+
+    points = np.array([[0, 0, 0], [1, 0, 0.05], [1, 1, 0], [0, 1, 0.05], [0.5, 0.5, -1.0]])
+    tets, _ = orient(points, np.array([[0, 1, 2, 3], [0, 1, 2, 4], [0, 2, 3, 4]]))
+    boundary = TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+    patch = np.zeros(len(boundary), np.int64)
+    tets, boundary, patch, removed = peel_boundary_slivers(points, tets, boundary, patch, FLOOR)
+    assert removed == 1 and len(tets) == 2 and len(boundary) == len(patch) == 6
+
+    def rotated(faces):   # each face from its smallest node: same set = same faces, same orientation
+        return {tuple(np.roll(f, -int(np.argmin(f)))) for f in np.asarray(faces).tolist()}
+
+    assert rotated(boundary) == rotated(TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64))
+                                        .boundary_faces())
+    assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}

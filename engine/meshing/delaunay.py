@@ -20,7 +20,7 @@ import numpy as np
 from ..mesh import STEINER, TetMesh
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
-from .improve import FLOOR, gmsh_optimize, min_dihedrals, quality_below, relocate
+from .improve import FLOOR, gmsh_optimize, min_dihedrals, peel_boundary_slivers, quality_below, relocate
 from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
@@ -66,6 +66,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         moves += more
         slid = np.flatnonzero((level == PATCH) & np.any(points != unslid, axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
+    tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR)
     seconds["improve"] = time.perf_counter() - start
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
@@ -75,13 +76,13 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
              "patch_nodes_added": int((packing.level == PATCH).sum() - (packing_in.level == PATCH).sum()),
              "steiner_points": len(steiner), "hull_tets": hull_tets, "outside_tets_dropped": hull_tets - len(tets),
              "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
-             "min_dihedral_before_improvement": before, "relocated_nodes": moves,
+             "min_dihedral_before_improvement": before, "relocated_nodes": moves, "boundary_slivers_removed": peeled,
              "seconds": {k: round(v, 3) for k, v in seconds.items()}}
     log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement from "
               "min dihedral %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
               len(tets), len(steiner), seconds["connect"], before, moves, seconds["improve"])
-    order = np.argsort(surface.patch, kind="stable")
-    return TetMesh(points, tets, level, entity, stats, boundary[order], surface.patch[order], bubble)
+    order = np.argsort(patch, kind="stable")
+    return TetMesh(points, tets, level, entity, stats, boundary[order], patch[order], bubble)
 
 
 def _slide_directions(points, level, entity, geometry, features):

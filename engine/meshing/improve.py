@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import numba
+from ..mesh import FACES
 from .tetra import gmsh_session, node_stars
 
 GMSH_THRESHOLD = 0.3        # Gmsh optimises tets with gamma below this
@@ -111,6 +112,53 @@ def quality_below(points, tets, quality: float) -> np.ndarray:
     """Which tets have min(radius ratio, min dihedral / 70.53 deg) below ``quality``."""
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     return _below_targets(np.ascontiguousarray(points, dtype=np.float64), tets, np.arange(len(tets)), quality)
+
+
+def peel_boundary_slivers(points, tets, boundary, patch, quality: float):
+    """Remove the tets below ``quality`` that lie flat between two boundary faces of one patch.
+
+    Such a tet fills the fold between two surface triangles that share an edge; its two
+    other faces become boundary instead (a surface edge flip across a flat tet, so the
+    surface moves by less than the tet's thickness and every node stays on the boundary).
+    A removal that would make an edge non-manifold (the flipped edge already on the
+    boundary) is skipped. Returns (tets, boundary, patch, removed count); the number of
+    bad tets is small, so they are taken one by one.
+    """
+    bad = np.flatnonzero(quality_below(points, tets, quality))
+    if not len(bad):
+        return tets, boundary, patch, 0
+    faces = {tuple(sorted(f)): k for k, f in enumerate(boundary.tolist())}
+    edges = {}
+    for f in boundary.tolist():
+        for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
+            edges[(min(a, b), max(a, b))] = edges.get((min(a, b), max(a, b)), 0) + 1
+    drop, gone, added, added_patch = [], set(), [], []
+    for t in bad:
+        own = tets[t][FACES]                              # outward faces of the tet
+        on_boundary = [faces.get(tuple(sorted(f))) for f in own.tolist()]
+        hits = [k for k in on_boundary if k is not None]
+        if len(hits) != 2 or max(hits) >= len(boundary) or patch[hits[0]] != patch[hits[1]]:
+            continue                                      # (faces made boundary here are left alone)
+        inner = own[[k is None for k in on_boundary]]     # the two faces that become boundary
+        shared = set(boundary[hits[0]].tolist()) & set(boundary[hits[1]].tolist())
+        flipped = tuple(sorted(set(tets[t].tolist()) - shared))
+        if len(shared) != 2 or edges.get(flipped, 0):
+            continue
+        drop.append(t)
+        gone.update(hits)
+        edges[flipped] = 2
+        edges[tuple(sorted(shared))] = 0
+        for f in inner[:, ::-1]:                          # reversed: outward for the remaining mesh
+            faces[tuple(sorted(f.tolist()))] = len(boundary) + len(added)
+            added.append(f)
+            added_patch.append(patch[hits[0]])
+    if not drop:
+        return tets, boundary, patch, 0
+    keep = np.ones(len(boundary), bool)
+    keep[list(gone)] = False
+    boundary = np.vstack([boundary[keep], np.array(added, dtype=boundary.dtype)])
+    patch = np.concatenate([patch[keep], np.array(added_patch, dtype=patch.dtype)])
+    return np.delete(tets, drop, axis=0), boundary, patch, len(drop)
 
 
 def min_dihedrals(points, tets) -> np.ndarray:
