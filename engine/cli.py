@@ -39,6 +39,18 @@ def _seed(text: str) -> int:
     return value
 
 
+def _plane(text: str) -> tuple[int, float]:
+    """'x=10', 'y=0' or 'z=-2.5' -> (axis, value)."""
+    axis, _, value = text.partition("=")
+    try:
+        number = float(value)
+    except ValueError:
+        number = float("nan")
+    if axis.strip().lower() not in ("x", "y", "z") or not np.isfinite(number):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a plane AXIS=VALUE such as z=10")
+    return "xyz".index(axis.strip().lower()), number
+
+
 class OneLineParser(argparse.ArgumentParser):
     """Argument errors as one line, like every other error of the CLI."""
 
@@ -80,6 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
                                              "and <name>.report.json in OUT")
     report.add_argument("out", type=Path, metavar="OUT", help="output folder of 'fuzzymesh mesh'")
     report.add_argument("--name", default=None, help="base name of the files (default: the one report there)")
+    report.add_argument("--cut", type=_plane, metavar="AXIS=VALUE",
+                        help="the plane of the cut through the mesh, e.g. z=10 (default: the plane holding the "
+                             "longest and shortest extents, at the median node)")
     report.set_defaults(run=_cmd_report)
 
     for noun in ("patterns", "recipes"):
@@ -175,7 +190,7 @@ def _cmd_report(args) -> int:
         if not (args.out / f"{name}{suffix}").is_file():
             raise JobError(f"'{name}{suffix}' is missing", where=str(args.out),
                            fix="mesh again with 'vtu' among output.formats")
-    for path in write_report(args.out, name):
+    for path in write_report(args.out, name, args.cut):
         print(f"wrote {path}")
     return 0
 

@@ -35,10 +35,14 @@ def report_summary(result) -> dict:
     })
 
 
-def write_report(directory: Path, name: str) -> list[Path]:
-    """(Re)write ``name.report.html`` in ``directory`` from the saved VTU, audit legend and report JSON."""
+def write_report(directory: Path, name: str, cut: tuple[int, float] | None = None) -> list[Path]:
+    """(Re)write ``name.report.html`` in ``directory`` from the saved VTU, audit legend and report JSON.
+
+    ``cut`` = (axis 0/1/2, value) places the cut plane x[axis] = value; None chooses it (see ``_cuts``).
+    """
     import meshio
 
+    from .errors import JobError
     from .io import write_all_or_nothing
 
     directory = Path(directory)
@@ -47,17 +51,23 @@ def write_report(directory: Path, name: str) -> list[Path]:
     mesh = meshio.read(directory / f"{name}.vtu")
     tets = next(block.data for block in mesh.cells if block.type.startswith("tetra"))[:, :4]
     cells = {key: values[0] for key, values in mesh.cell_data.items()}
-    page = render_html(summary, legend, mesh.points, tets, cells)
+    if cut is not None:
+        low, high = mesh.points[:, cut[0]].min(), mesh.points[:, cut[0]].max()
+        if not low < cut[1] < high:
+            raise JobError(f"the plane {'xyz'[cut[0]]} = {cut[1]:g} cuts no element", where=str(directory / f"{name}.vtu"),
+                           fix=f"give a value between {low:.6g} and {high:.6g}")
+    page = render_html(summary, legend, mesh.points, tets, cells, cut)
     path = directory / f"{name}.report.html"
     return write_all_or_nothing([(path, lambda tmp: Path(tmp).write_text(page))])
 
 
-def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarray, cells: dict) -> str:
+def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarray, cells: dict,
+                cut: tuple[int, float] | None = None) -> str:
     quality = tet_quality(points, tets)
     plots = {
         "Element quality": _quality_histograms(quality),
         "Size conformity": _conformity_histogram(summary["size_conformity"]),
-        "Cut through the mesh": _cuts(points, tets, cells, legend, quality),
+        "Cut through the mesh": _cuts(points, tets, cells, legend, quality, cut),
         "Stage timings": _timings(summary["timings"]),
     }
     q, c, b = summary["quality"], summary["size_conformity"], summary.get("boundary", {})
@@ -158,11 +168,16 @@ def cut_polygons(points: np.ndarray, tets: np.ndarray, axis: int, value: float):
     return crossing, np.take_along_axis(at, order[..., None], axis=1)
 
 
-def _cuts(points, tets, cells, legend, quality) -> str:
+def _cuts(points, tets, cells, legend, quality, cut=None) -> str:
+    """The plane x[axis] = value of ``cut``; by default the one holding the longest and shortest extents,
+    at the nodes' median."""
     from matplotlib.collections import PolyCollection
 
-    axis = int(np.argsort(np.ptp(points, axis=0))[1])   # the plane holds the longest and shortest extents
-    value = float(np.median(points[:, axis]))
+    if cut is None:
+        axis = int(np.argsort(np.ptp(points, axis=0))[1])
+        value = float(np.median(points[:, axis]))
+    else:
+        axis, value = int(cut[0]), float(cut[1])
     crossing, polygons = cut_polygons(points, tets, axis, value)
     figure, axes = _figure(2, 6.0, 5.0)
     winners = cells["winner"][crossing]

@@ -65,3 +65,23 @@ def test_a_headless_browser_shows_the_plots(meshed, tmp_path):
     for colour in ("#4477aa", "#228833", "#aa3377"):
         rgb = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)]) / 255
         assert (np.abs(pixels - rgb).max(axis=2) < 0.02).sum() > 2000, colour
+
+
+def test_the_cut_plane_can_be_chosen(meshed, tmp_path, capsys):
+    out, _ = meshed
+    folder = shutil.copytree(out, tmp_path / "out")
+    images = lambda: re.findall(r'src="data:image/png;base64,([^"]+)"', (folder / "mesh.report.html").read_text())
+    default = images()
+    assert main(["report", str(folder), "--cut", "z=10"]) == 0
+    chosen = images()
+    assert chosen[2] != default[2], "the cut differs"
+    assert chosen[:2] == default[:2] and chosen[3] == default[3], "the other plots do not"
+    capsys.readouterr()
+    for bad in ("w=1", "z"):
+        with pytest.raises(SystemExit) as exit_:
+            main(["report", str(folder), "--cut", bad])
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and err.count("\n") == 1 and "AXIS=VALUE" in err, err
+    assert main(["report", str(folder), "--cut", "z=500"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("fuzzymesh: error:") and "between 0 and 120" in err, err
