@@ -9,8 +9,9 @@ import pytest
 
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
-from engine.mesh import NODE_LEVELS
+from engine.mesh import NODE_LEVELS, TetMesh
 from engine.meshing import get_mesher, mesher_names
+from engine.meshing.qhull import boundary_defects
 from engine.meshing.surface import arc_parameter
 from engine.packing import get_packer
 from engine.pipeline import build_geometry, build_sizing
@@ -122,8 +123,20 @@ def test_qhull_mesher_reports_its_boundary_defects():
     quality = tet_quality(mesh.points, mesh.tets)
     assert quality.min_dihedral.min() < 10.0
     assert len(mesh.boundary) == 0, "no conforming boundary is claimed"
-    assert mesh.stats["boundary_faces_through_volume"] > 0, "free faces cut through the solid"
     assert mesh.stats["boundary_faces"] == len(mesh.boundary_faces())
+    assert mesh.stats == {**mesh.stats, **boundary_defects(mesh)}
+
+
+def test_boundary_defects_counts_a_hole_through_the_volume():
+    """A conforming mesh has no defect; removing a tet of volume nodes opens four faces through the volume."""
+    mesh = meshed("l_bracket")
+    assert boundary_defects(mesh)["boundary_faces_through_volume"] == 0
+    assert boundary_defects(mesh)["non_manifold_boundary_edges"] == 0
+    inner = np.flatnonzero((mesh.node_level[mesh.tets] == NODE_LEVELS.index("volume")).all(axis=1))[0]
+    holed = TetMesh(mesh.points, np.delete(mesh.tets, inner, axis=0), mesh.node_level, mesh.node_entity)
+    defects = boundary_defects(holed)
+    assert defects["boundary_faces"] == len(mesh.boundary_faces()) + 4
+    assert defects["boundary_faces_through_volume"] == 4
 
 
 def mesh_file(tmp_path, mesh, size):
