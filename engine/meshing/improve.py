@@ -2,22 +2,31 @@
 
 1. Gmsh's optimiser (edge and face swaps, node relocation) on the mesh loaded
    as discrete entities: boundary nodes sit on the boundary entity and are
-   never moved; elements below ``Mesh.OptimizeThreshold`` (gamma) are worked on.
-   Measured on the 184k-node junction (1.0M tets): 9,470 tets under 10
-   degrees become 18 in 1.8-2.4 s.
-2. What is left under the targets is fixed by moving the nodes of each bad
+   never moved; elements below ``Mesh.OptimizeThreshold`` (gamma, the radius
+   ratio) are worked on.
+2. What is left under the target is fixed by moving the nodes of each bad
    tetrahedron to the best of a few candidate places (star centroid,
    deterministic perturbations), judged by the worst element quality of the
-   node's star, min(radius ratio, min dihedral / 70.53 deg) (1 for the regular
-   tetrahedron); a move is kept only if it improves it. Volume nodes move
-   freely, nodes of planar patches slide in their plane, curve and corner
+   node's star, q = min(radius ratio, min dihedral / 70.53 deg) (1 for the
+   regular tetrahedron); a move is kept only if it improves it. Volume nodes
+   move freely, nodes of planar patches slide in their plane, curve and corner
    nodes stay. Nodes of curved patches stay too, but for a last pass on what
    is still under the floor (10 deg, 0.15: sliding them changes the chords
-   of the surface), where they slide in the plane of their input face. The targets (14 deg, 0.2) were
-   chosen by measurement on the same case, against the 10 s budget for
-   connection and improvement: relocating up to 12/14/16/18 deg took
-   0.8/0.8/1.9/6.5 s here; Gmsh 4.15.2 gives 11.0-11.5 (Delaunay) and
-   13.3-14.7 deg (HXT) on that solid.
+   of the surface), where they slide in the plane of their input face.
+
+The settings were chosen by measurement on the junction benchmark (bench/run.py cases,
+10k, 100k and 1M tets, both cylinder positions), against Gmsh 4.15.2 HXT on the same
+solid and sizes (min dihedral 13.7-15.7 deg, 1st percentile about 20 deg):
+
+| Gmsh threshold | target | min dihedral (10k / 100k / 1M) | 1st pct, 1M | improvement s, 1M |
+|---|---|---|---|---|
+| 0.3 | 14 deg / 0.2 | 14.0 / 14.0 / 14.0 | 19.5 | 2.6 |
+| 0.3 | 20 deg | 18.5-19.7 / 18.1 / 18.2-18.4 | 23.0 | 12.1-12.5 |
+| 0.4 | 20 deg | 20.0 / 20.0 / 20.0 | 23.9 | 4.1-5.3 |
+| 0.5 | 20 deg | 20.1 / 20.1 / 20.0 | 26.9-27.0 | 4.2-4.7 |
+
+A wider Gmsh threshold lets its swaps repair what single-node moves cannot (at 0.3 the
+relocation stalls short of 20 deg and takes three times longer).
 """
 from __future__ import annotations
 
@@ -27,10 +36,9 @@ from .._numba import numba
 from ..mesh import FACES
 from .tetra import gmsh_session, node_stars
 
-GMSH_THRESHOLD = 0.3        # Gmsh optimises tets with gamma below this
-TARGET_DIHEDRAL = 14.0      # degrees: relocation works on tets whose minimum dihedral is below,
-TARGET_RADIUS_RATIO = 0.2   # ... or whose radius ratio is below
+GMSH_THRESHOLD = 0.5        # Gmsh optimises tets with gamma below this
 REGULAR_DIHEDRAL = 70.528779365509308
+TARGET = 20.0 / REGULAR_DIHEDRAL   # relocation works on tets with q below: min dihedral < 20 deg or radius ratio < 0.284
 FLOOR = min(10.0 / REGULAR_DIHEDRAL, 0.15)   # the quality every element must reach
 RELOCATION_PASSES = 6
 CANDIDATES = 24             # perturbation directions per node and pass
@@ -75,7 +83,7 @@ def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
 
 def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int = 0,
              target: float | None = None) -> tuple[np.ndarray, int]:
-    """Move nodes of tets below the targets (or below ``target`` quality) where that improves their stars.
+    """Move nodes of tets below the ``target`` quality (default TARGET) where that improves their stars.
 
     ``slide`` (n, 3) per node: NaN for a fixed node, zeros for a free one, a
     unit normal for a node that slides in a plane. Returns (points, number of
@@ -88,11 +96,11 @@ def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int 
     directions = np.random.default_rng(seed).normal(size=(CANDIDATES, 3))
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     movable = ~np.isnan(slide[:, 0])
-    target = min(TARGET_DIHEDRAL / REGULAR_DIHEDRAL, TARGET_RADIUS_RATIO) if target is None else target
+    target = TARGET if target is None else target
     check = np.arange(len(tets))
     moves = 0
     for _ in range(RELOCATION_PASSES):
-        bad = check[_below_targets(points, tets, check, target)]
+        bad = check[_below_quality(points, tets, check, target)]
         if len(bad) == 0:
             break
         candidates = np.unique(tets[bad].ravel())
@@ -111,7 +119,7 @@ def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int 
 def quality_below(points, tets, quality: float) -> np.ndarray:
     """Which tets have min(radius ratio, min dihedral / 70.53 deg) below ``quality``."""
     tets = np.ascontiguousarray(tets, dtype=np.int64)
-    return _below_targets(np.ascontiguousarray(points, dtype=np.float64), tets, np.arange(len(tets)), quality)
+    return _below_quality(np.ascontiguousarray(points, dtype=np.float64), tets, np.arange(len(tets)), quality)
 
 
 def peel_boundary_slivers(points, tets, boundary, patch, quality: float):
@@ -175,7 +183,7 @@ def _min_dihedrals(points, tets):
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
-def _below_targets(points, tets, rows, quality):
+def _below_quality(points, tets, rows, quality):
     """Which of the tets ``rows`` have _quality below ``quality``."""
     out = np.empty(len(rows), dtype=np.bool_)
     for i in numba.prange(len(rows)):
