@@ -100,7 +100,7 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
         raise JobError("no pattern could be placed on this solid: the placements match none of its features",
                        where=job.where("recipe") if job.recipe else job.where("place"),
                        fix="add the base pattern 'uniform-domain' or place patterns with 'at:' on named features")
-    return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size)
+    return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size, features)
 
 
 def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None) -> FEModel:
@@ -131,7 +131,7 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     with stage("sizing", timings):
         sizing = build_sizing(job, geometry, features, kb)
         try:
-            expected = check_element_limit(geometry, sizing, max_elements, features)
+            expected = check_element_limit(sizing, max_elements)
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
     log.info("sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected "

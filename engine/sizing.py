@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from ._numba import numba
 import numpy as np
@@ -172,10 +173,11 @@ class SizingField:
     """h(x) from placed patterns by membership dominance, with the gradation limit and bounds."""
 
     def __init__(self, placed: list[PlacedPattern], geometry, gradation: float, global_size: float,
-                 min_size: float | None = None, max_size: float | None = None):
+                 min_size: float | None = None, max_size: float | None = None, features=None):
         if not placed:
             raise KnowledgeError("no pattern is placed", fix="place the base pattern 'uniform-domain'")
         self.placed = placed
+        self.geometry, self.features = geometry, features
         self.global_size = global_size
         self.gradation = gradation
         self.min_size, self.max_size = min_size, max_size
@@ -264,6 +266,11 @@ class SizingField:
 
     def legend(self) -> list[dict]:
         return [p.legend() for p in self.placed]
+
+    @cached_property
+    def expected_counts(self) -> tuple[float, float]:
+        """(nodes, tetrahedra) a packing of this field should have (:func:`estimate_counts`), computed once."""
+        return estimate_counts(self.geometry, self, self.features)
 
 
 def _membership_at(zone: BoundZone, d: np.ndarray) -> np.ndarray:
@@ -450,18 +457,20 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
 
 # ------------------------------------------------------------------------- count estimate
 
-def estimate_counts(geometry, sizing, features=None, samples: int = 400_000, seed: int = 0) -> tuple[float, float]:
+def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, seed: int = 0) -> tuple[float, float]:
     """Expected (nodes, tetrahedra) of a bubble packing of the sizing field.
 
     nodes = NODES_PER_H3 * integral of h^-3 over the volume + NODES_PER_H2 * integral
-    of h^-2 over the surface + integral of h^-1 along the feature curves + corners
-    (Monte Carlo, seeded). The constants were fitted to bubble packings of cubes,
-    plates, a cylinder and an L-bracket (within 6 %): bubbles pack the volume at
-    about 0.94 / h^3, and the surface layer adds 0.30 / h^2.
+    of h^-2 over the surface + integral of h^-1 along the feature curves + corners.
+    The volume integral samples one random point in each cell of a grid of about
+    ``samples`` cells over the bounding box (stratified, seeded: far less variance than
+    as many independent points); the surface integral ``samples // 4`` area-weighted points.
+    The constants were fitted to bubble packings of cubes, plates, a cylinder and an
+    L-bracket (within 6 %): bubbles pack the volume at about 0.94 / h^3, and the
+    surface layer adds 0.30 / h^2.
     """
     rng = np.random.default_rng(seed)
-    lo, hi = geometry.bounds
-    points = rng.uniform(lo, hi, size=(samples, 3))
+    points = stratified_points(*geometry.bounds, samples, rng)
     inside = geometry.contains(points)
     volume_density = float(np.mean(sizing(points[inside]) ** -3.0)) if inside.any() else sizing.h_min ** -3.0
     on_surface, _ = trimesh.sample.sample_surface(geometry.mesh, samples // 4, seed=seed)
@@ -476,9 +485,18 @@ def estimate_counts(geometry, sizing, features=None, samples: int = 400_000, see
     return nodes, nodes * TETS_PER_NODE
 
 
-def check_element_limit(geometry, sizing, max_elements: float, features=None) -> float:
+def stratified_points(lo: np.ndarray, hi: np.ndarray, count: int, rng) -> np.ndarray:
+    """One uniform random point in each cell of a grid of about ``count`` near-cubic cells over [lo, hi]."""
+    extent = np.maximum(hi - lo, 1e-300)
+    cell = float(np.cbrt(np.prod(extent) / count))
+    shape = np.maximum(1, np.round(extent / cell)).astype(int)
+    index = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), -1).reshape(-1, 3)
+    return lo + (index + rng.random(index.shape)) * (extent / shape)
+
+
+def check_element_limit(sizing, max_elements: float) -> float:
     """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra."""
-    _, tets = estimate_counts(geometry, sizing, features)
+    _, tets = sizing.expected_counts
     if not math.isfinite(tets) or tets > max_elements:
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {max_elements:.3g}); "

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..progress import progress
-from ..sizing import NODES_PER_H3, estimate_counts
+from ..sizing import NODES_PER_H3
 from . import CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
 from .forces import deletions, forces, morton_order, neighbour_lists, proximity, update_neighbours
@@ -119,7 +119,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
                  initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
     packing = Packing.concatenate(parts)
     packing.events = events
-    packing.stats = _statistics(packing, geometry, features, sizing, initial_counts, timings, events)
+    packing.stats = _statistics(packing, sizing, initial_counts, timings, events)
     return packing
 
 
@@ -295,9 +295,9 @@ def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sou
     return spots, sources
 
 
-def _statistics(packing, geometry, features, sizing, initial_counts, timings, events) -> dict:
+def _statistics(packing, sizing, initial_counts, timings, events) -> dict:
     """Counts (against the sizing field's estimate), nearest-neighbour distance / r0, events, timings."""
-    expected_nodes, _ = estimate_counts(geometry, sizing, features)
+    expected_nodes, _ = sizing.expected_counts
     h = 2 * packing.radius
     distance, index = cKDTree(packing.points).query(packing.points, k=2, workers=-1)
     ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
