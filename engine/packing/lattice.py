@@ -65,22 +65,28 @@ def _curve_nodes(features, sizing, existing) -> Packing:
     return Packing(points, np.full(len(points), CURVE), entity, sizing(points) / 2)
 
 
-def _subdivide(triangles: np.ndarray, sizing, max_levels: int = 24):
-    """Split triangles 1-to-4 until their longest edge is below h at their centroid."""
+def _subdivide(triangles: np.ndarray, sizing, max_levels: int = 64):
+    """Bisect triangles at the midpoint of their longest edge until that edge is below h at their centroid.
+
+    Longest-edge bisection keeps the leaves' count proportional to area / h^2 whatever the triangles'
+    shape (1-to-4 splits keep a long, thin facet's aspect ratio and make leaves far finer than h).
+    """
     leaves, owners = [], []
     owner = np.arange(len(triangles))
     for _ in range(max_levels):
         if len(triangles) == 0:
             break
-        edges = np.linalg.norm(triangles - np.roll(triangles, 1, axis=1), axis=2).max(axis=1)
-        fine = edges <= sizing(triangles.mean(axis=1))
+        lengths = np.linalg.norm(triangles - np.roll(triangles, -1, axis=1), axis=2)   # edge k: vertex k to k+1
+        longest = lengths.argmax(axis=1)
+        fine = lengths.max(axis=1) <= sizing(triangles.mean(axis=1))
         leaves.append(triangles[fine])
         owners.append(owner[fine])
-        t, owner = triangles[~fine], owner[~fine]
-        m01, m12, m20 = (t[:, 0] + t[:, 1]) / 2, (t[:, 1] + t[:, 2]) / 2, (t[:, 2] + t[:, 0]) / 2
-        triangles = np.concatenate([np.stack([t[:, 0], m01, m20], 1), np.stack([m01, t[:, 1], m12], 1),
-                                    np.stack([m20, m12, t[:, 2]], 1), np.stack([m01, m12, m20], 1)])
-        owner = np.tile(owner, 4)
+        t, k, owner = triangles[~fine], longest[~fine], owner[~fine]
+        rows = np.arange(len(t))[:, None]
+        a, b, c = np.moveaxis(t[rows, (k[:, None] + np.arange(3)) % 3], 1, 0)   # a-b is the longest edge
+        middle = 0.5 * (a + b)
+        triangles = np.concatenate([np.stack([a, middle, c], 1), np.stack([middle, b, c], 1)])
+        owner = np.tile(owner, 2)
     leaves.append(triangles)
     owners.append(owner)
     return np.concatenate(leaves), np.concatenate(owners)
