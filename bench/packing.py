@@ -41,7 +41,8 @@ def main() -> None:
           f"({', '.join(f'{t:.2f}' for t, _ in runs)}); per level (last run): "
           + ", ".join(f"{k} {v:.2f} s" for k, v in stats["seconds"].items()))
     print(f"nearest neighbour / r0: median {stats['nearest_over_r0']['median']:.3f}, "
-          f"within [0.85, 1.15]: {stats['nearest_over_r0']['within_0.85_1.15']:.3f}; "
+          f"within [0.85, 1.15]: {stats['nearest_over_r0']['within_0.85_1.15']:.3f} "
+          f"(initial placement {stats['initial_nearest_over_r0']['within_0.85_1.15']:.3f}); "
           f"deleted {stats['deleted']}, inserted {stats['inserted']}")
     print(f"peak resident memory of the process: {peak:.0f} MB")
 

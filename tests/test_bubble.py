@@ -46,9 +46,13 @@ def test_bubbles_settle_at_the_stable_distance(job):
     bubble = pack(job)
     lattice = pack(job, "lattice")
     share, baseline = spacing_share(bubble, sizing), spacing_share(lattice, sizing)
-    print(f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice (= initial placement) {baseline:.3f}")
+    initial = bubble.stats["initial_nearest_over_r0"]["within_0.85_1.15"]
+    print(f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice {baseline:.3f}, "
+          f"bubble's initial placement {initial:.3f}")
+    assert share == pytest.approx(bubble.stats["nearest_over_r0"]["within_0.85_1.15"])
     assert share >= 0.90
     assert share > baseline + 0.2
+    assert share > initial + 0.2
 
 
 def test_bubbles_lie_on_their_entities():

@@ -102,12 +102,13 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
     parts = [_with_ids(corners, counters)]
     constraints = {CURVE: CurveConstraint(features), PATCH: PatchConstraint(geometry, features),
                    VOLUME: VolumeConstraint(geometry)}
-    initial_counts = {}
+    initial_counts, starts = {}, [corners.points]
     for level in (CURVE, PATCH, VOLUME):
         start = time.perf_counter()
         frozen = Packing.concatenate(parts)
         start_nodes = _initial(level, geometry, features, sizing, frozen, rng, initial_density)
         initial_counts[LEVELS[level]] = len(start_nodes)
+        starts.append(start_nodes.points)
         state = LevelState(level, start_nodes.points, start_nodes.entity,
                            _new_ids(len(start_nodes), counters), frozen.points)
         steps = _relax(state, constraints[level], geometry, sizing, control, rng, events, counters)
@@ -119,7 +120,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
                  initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
     packing = Packing.concatenate(parts)
     packing.events = events
-    packing.stats = _statistics(packing, sizing, initial_counts, timings, events)
+    packing.stats = _statistics(packing, sizing, initial_counts, np.concatenate(starts), timings, events)
     return packing
 
 
@@ -295,20 +296,26 @@ def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sou
     return spots, sources
 
 
-def _statistics(packing, sizing, initial_counts, timings, events) -> dict:
-    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0, events, timings."""
+def _statistics(packing, sizing, initial_counts, initial_points, timings, events) -> dict:
+    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 of the packing and of
+    its starting places (each level's start beside the settled lower levels), events, timings."""
     expected_nodes, _ = sizing.expected_counts
-    h = 2 * packing.radius
-    distance, index = cKDTree(packing.points).query(packing.points, k=2, workers=-1)
-    ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
     return {
         "nodes": len(packing), "expected_nodes": expected_nodes,
         **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
         "initial": initial_counts,
-        "nearest_over_r0": {"median": float(np.median(ratio)), "within_0.85_1.15": float(
-            np.mean((ratio >= 0.85) & (ratio <= 1.15))), "p01": float(np.percentile(ratio, 1)),
-            "p99": float(np.percentile(ratio, 99))},
+        "nearest_over_r0": nearest_over_r0(packing.points, 2 * packing.radius),
+        "initial_nearest_over_r0": nearest_over_r0(initial_points, sizing(initial_points)),
         "deleted": sum(e.action == "delete" for e in events),
         "inserted": sum(e.action == "insert" for e in events),
         "seconds": timings,
     }
+
+
+def nearest_over_r0(points: np.ndarray, h: np.ndarray) -> dict:
+    """Distance to the nearest other bubble over the stable distance r0 = (h_i + h_j) / 2: median,
+    share within [0.85, 1.15], 1st and 99th percentiles."""
+    distance, index = cKDTree(points).query(points, k=2, workers=-1)
+    ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
+    return {"median": float(np.median(ratio)), "within_0.85_1.15": float(np.mean((ratio >= 0.85) & (ratio <= 1.15))),
+            "p01": float(np.percentile(ratio, 1)), "p99": float(np.percentile(ratio, 99))}
