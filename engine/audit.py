@@ -83,27 +83,29 @@ def _node_history(mesh: TetMesh, packing, knowledge):
     """Per node: bubble id and the event that inserted it; the legend of the population rules."""
     n = len(mesh.points)
     bubble = mesh.node_bubble if mesh.node_bubble is not None else np.full(n, -1)
-    inserts = [e for e in packing.events if e.action == "insert"]
-    rule_ids = list(dict.fromkeys(e.rule for e in packing.events))
+    events = packing.events
+    rule_ids, rule_of_event = np.unique(events.rule, return_inverse=True)
+    rule_ids, rule_of_event = rule_ids.tolist(), rule_of_event.astype(np.int32)
     sources = {}
     if knowledge is not None:
         for base in knowledge.rulebases.values():
             sources.update({r.id: r.source for r in base.rules})
     inserted_at, insert_rule, insert_firing = np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n)
-    if inserts:
-        ids = np.array([e.bubble for e in inserts])
+    is_insert = events.action == "insert"
+    inserts = np.flatnonzero(is_insert)
+    if len(inserts):
+        ids = events.bubble[inserts]
         order = np.argsort(ids)
         at = np.clip(np.searchsorted(ids[order], bubble), 0, len(ids) - 1)
         found = (bubble >= 0) & (ids[order][at] == bubble)
-        event = order[at[found]]
-        inserted_at[found] = [inserts[i].iteration for i in event]
-        insert_rule[found] = [rule_ids.index(inserts[i].rule) for i in event]
-        insert_firing[found] = [inserts[i].firing for i in event]
-    counts = {r: {"insert": 0, "delete": 0} for r in rule_ids}
-    for e in packing.events:
-        counts[e.rule][e.action] += 1
-    rules = [{"index": k, "id": r, "source": sources.get(r, ""), "insertions": counts[r]["insert"],
-              "deletions": counts[r]["delete"]} for k, r in enumerate(rule_ids)]
+        event = inserts[order[at[found]]]
+        inserted_at[found] = events.iteration[event]
+        insert_rule[found] = rule_of_event[event]
+        insert_firing[found] = events.firing[event]
+    insertions = np.bincount(rule_of_event[is_insert], minlength=len(rule_ids))
+    deletions = np.bincount(rule_of_event[~is_insert], minlength=len(rule_ids))
+    rules = [{"index": k, "id": r, "source": sources.get(r, ""), "insertions": int(insertions[k]),
+              "deletions": int(deletions[k])} for k, r in enumerate(rule_ids)]
     nodes = {"node_level": mesh.node_level.astype(np.int32), "node_entity": mesh.node_entity.astype(np.int32),
              "bubble": bubble.astype(np.int64), "inserted_at": inserted_at, "insert_rule": insert_rule,
              "insert_firing": insert_firing}

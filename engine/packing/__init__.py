@@ -13,6 +13,14 @@ from ..registry import Registry
 
 LEVELS = ("corner", "curve", "patch", "volume")
 CORNER, CURVE, PATCH, VOLUME = range(4)
+# one population-control event per row: the bubble deleted or inserted, its level, the packing
+# iteration, the action, the id of the rule that fired most strongly and its firing degree
+EVENT = np.dtype([("bubble", np.int64), ("level", "U6"), ("iteration", np.int32), ("action", "U6"),
+                  ("rule", object), ("firing", np.float64)])
+
+
+def no_events() -> np.recarray:
+    return np.zeros(0, EVENT).view(np.recarray)
 
 
 @dataclass
@@ -25,7 +33,7 @@ class Packing:
     radius: np.ndarray          # (n,) half the target size at the node
     stats: dict = field(default_factory=dict)
     ids: np.ndarray | None = None   # (n,) bubble ids, cited by population-control events
-    events: list = field(default_factory=list)
+    events: np.recarray = field(default_factory=no_events)   # EVENT rows
 
     def __len__(self) -> int:
         return len(self.points)
@@ -39,7 +47,7 @@ class Packing:
                        np.concatenate([p.level for p in parts]).astype(np.int8),
                        np.concatenate([p.entity for p in parts]).astype(np.int64),
                        np.concatenate([p.radius for p in parts]), stats or {}, ids,
-                       [e for p in parts for e in p.events])
+                       np.concatenate([no_events()] + [p.events for p in parts]).view(np.recarray))
 
 
 PACKERS = Registry("fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice"])

@@ -27,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from ..progress import progress
 from ..sizing import NODES_PER_H3
-from . import CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
+from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
 from .forces import deletions, forces, morton_order, neighbour_lists, proximity, update_neighbours
 from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
@@ -46,16 +46,6 @@ SKIN = 0.3                       # a bubble that moved this x h since the last b
 STALE_SHARE = 0.05               # rebuild the neighbour lists once this share of bubbles is stale
 REBUILD_EVERY = 50               # ... or after this many steps
 INSIDE_CHECK_EVERY = 5           # volume bubbles outside the solid go back to their last checked place
-
-
-@dataclass
-class Event:
-    bubble: int          # bubble id
-    level: str
-    iteration: int
-    action: str          # "delete" | "insert"
-    rule: str            # id of the rule that fired most strongly
-    firing: float
 
 
 @dataclass
@@ -96,7 +86,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
 
     rng = np.random.default_rng(seed)
     control = PopulationControl(knowledge or load_knowledge())
-    events: list[Event] = []
+    events: list[np.ndarray] = []     # EVENT rows, a block per control round
     timings, counters = {}, {"next_id": 0}
     corners = _corner_nodes(features, sizing)
     parts = [_with_ids(corners, counters)]
@@ -119,8 +109,8 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
         log.info("packing %s: %d bubbles (started with %d) in %d steps, %.2f s", LEVELS[level], len(points),
                  initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
     packing = Packing.concatenate(parts)
-    packing.events = events
-    packing.stats = _statistics(packing, sizing, initial_counts, np.concatenate(starts), timings, events)
+    packing.events = np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray)
+    packing.stats = _statistics(packing, sizing, initial_counts, np.concatenate(starts), timings, packing.events)
     return packing
 
 
@@ -249,13 +239,11 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
     sources = np.flatnonzero(act_i)
     if len(sources):
         new_x, sources = _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng)
-    for idx in np.flatnonzero(delete):
-        events.append(Event(int(state.ids[idx]), level_name, step, "delete", control.delete.rules[rule[idx]].id,
-                            float(firing[idx])))
+    deleted = np.flatnonzero(delete)
     new_ids = _new_ids(len(new_x), counters)
-    for idx, new_id in zip(sources, new_ids):
-        events.append(Event(int(new_id), level_name, step, "insert", control.insert.rules[rule_i[idx]].id,
-                            float(firing_i[idx])))
+    events.append(_events(state.ids[deleted], level_name, step, "delete", control.delete, rule[deleted],
+                          firing[deleted]))
+    events.append(_events(new_ids, level_name, step, "insert", control.insert, rule_i[sources], firing_i[sources]))
     if not delete.any() and not len(new_x):
         return None
     keep = ~delete
@@ -264,6 +252,15 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
     state.entity = np.concatenate([state.entity[keep], state.entity[sources]])
     state.ids = np.concatenate([state.ids[keep], new_ids])
     return keep
+
+
+def _events(bubbles, level_name, step, action, rule_base, rules, firing) -> np.ndarray:
+    """EVENT rows: ``bubbles`` acted on by ``action`` at ``step``; ``rules`` index ``rule_base.rules``."""
+    rows = np.zeros(len(bubbles), EVENT)
+    rows["bubble"], rows["level"], rows["iteration"], rows["action"] = bubbles, level_name, step, action
+    rows["rule"] = np.array([r.id for r in rule_base.rules])[rules]
+    rows["firing"] = firing
+    return rows
 
 
 def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng):
@@ -306,8 +303,8 @@ def _statistics(packing, sizing, initial_counts, initial_points, timings, events
         "initial": initial_counts,
         "nearest_over_r0": nearest_over_r0(packing.points, 2 * packing.radius),
         "initial_nearest_over_r0": nearest_over_r0(initial_points, sizing(initial_points)),
-        "deleted": sum(e.action == "delete" for e in events),
-        "inserted": sum(e.action == "insert" for e in events),
+        "deleted": int(np.count_nonzero(events.action == "delete")),
+        "inserted": int(np.count_nonzero(events.action == "insert")),
         "seconds": timings,
     }
 
