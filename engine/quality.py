@@ -177,13 +177,23 @@ def size_conformity(mesh, sizing) -> dict:
             "histogram": {"bins": CONFORMITY_BINS.tolist(), "counts": counts.tolist()}}
 
 
-def boundary_report(mesh, geometry, samples: int = 200_000) -> dict:
+# Hausdorff samples per boundary triangle, at least and at most: on the paper-scale cylinder (1,178 boundary
+# triangles) 40 per triangle found both maxima within 1 % of what 200k samples found, in a quarter of the time
+HAUSDORFF_SAMPLES_PER_TRIANGLE = 40
+HAUSDORFF_SAMPLES = (20_000, 200_000)
+
+
+def boundary_report(mesh, geometry, samples: int | None = None) -> dict:
     """The mesh's boundary surface checked by pymeshlab against the input surface: triangle quality
-    (inradius / circumradius, normalised), Hausdorff distance both ways (min / mean / max / RMS),
-    topology (two-manifold, boundary edges, components, holes) and area and volume against the input's."""
+    (inradius / circumradius, normalised), Hausdorff distance both ways (min / mean / max / RMS, with
+    ``samples`` points, by default HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary triangle within
+    HAUSDORFF_SAMPLES), topology (two-manifold, boundary edges, components, holes) and area and volume
+    against the input's."""
     import pymeshlab
 
     boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
+    if samples is None:
+        samples = int(np.clip(HAUSDORFF_SAMPLES_PER_TRIANGLE * len(boundary), *HAUSDORFF_SAMPLES))
     used, local = np.unique(boundary, return_inverse=True)
     meshes = pymeshlab.MeshSet()
     meshes.add_mesh(pymeshlab.Mesh(mesh.points[used], local.reshape(-1, 3)), "boundary")
