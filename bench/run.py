@@ -6,7 +6,8 @@ For the junction with the cylinder at the plate centre and near its edge, at siz
 and 1M tetrahedra (bench/cases.py), every mesher meshes the same solid with the same h(x), each run in its
 own process, ``--repeats`` times (medians). Writes ``results.json`` (every raw figure and the machine),
 ``results.md`` (the tables, the ratios fuzzymesh / Gmsh, seconds and MB per 1k tets) and ``scaling.png``
-into ``--out`` (default: this folder). ``--quick``: the 10k and 100k rows of both junctions, one run
+into ``--out`` (default: this folder), with the paper-scale end-to-end time (bench/paper_scale.py) and the
+issue's targets checked. ``--quick``: the 10k and 100k rows of both junctions, one run
 each (under 3 minutes on the 2-core reference machine). ``--scale S`` replaces the tiers by one
 row with every size x S (S = 1: the junction-edge recipe at H = 1.8, about 1M tets).
 Needs the bench extra: ``pip install ".[bench]"`` (Gmsh with OpenCASCADE and HXT, matplotlib).
@@ -19,6 +20,7 @@ import json
 import logging
 import os
 import shlex
+import subprocess
 import sys
 import tempfile
 import time
@@ -66,6 +68,8 @@ def parse(argv=None) -> argparse.Namespace:
     parser.add_argument("--no-warm-up", dest="warm_up", action="store_false",
                         help="skip the small run that makes sure numba's kernels are compiled")
     parser.add_argument("--no-plot", dest="plot", action="store_false")
+    parser.add_argument("--no-paper-scale", dest="paper_scale", action="store_false",
+                        help="skip the paper-scale end-to-end timing (bench/paper_scale.py, the Fig. 9 example)")
     args = parser.parse_args(argv)
     if args.repeats is not None and args.repeats < 1:
         parser.error("--repeats must be at least 1")
@@ -78,6 +82,17 @@ def parse(argv=None) -> argparse.Namespace:
     return args
 
 
+def paper_scale(repeats: int, folder: Path) -> dict:
+    """bench/paper_scale.py in its own process: the Fig. 9 example end to end, medians of ``repeats`` runs."""
+    from harness import OMP_WAIT_POLICY
+
+    out = folder / "paper-scale.json"
+    logging.getLogger("bench").info("paper scale (examples/connected-uniform-nonuniform.yaml) x %d", repeats)
+    subprocess.run([sys.executable, str(HERE / "paper_scale.py"), "--repeats", str(repeats), "--json", str(out)],
+                   check=True, capture_output=True, env={**os.environ, "OMP_WAIT_POLICY": OMP_WAIT_POLICY})
+    return json.loads(out.read_text())
+
+
 def main(argv=None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     logging.getLogger("fuzzymesh").setLevel(logging.WARNING)
@@ -88,7 +103,7 @@ def main(argv=None) -> int:
     args = parse(argv)
     from cases import TIERS
     from harness import machine_info, measure_case, warm_up
-    from results import markdown, plot_scaling, scaling
+    from results import markdown, plot_scaling, scaling, targets
 
     begin = time.perf_counter()
     rows = [(f"x{args.scale:g}", args.scale)] if args.scale else [(tier, TIERS[tier]) for tier in args.tiers]
@@ -103,9 +118,12 @@ def main(argv=None) -> int:
         for case in args.cases:
             for tier, scale in rows:
                 results["rows"].append(measure_case(case, tier, scale, args.meshers, args.repeats, Path(folder)))
+        if args.paper_scale and "fuzzymesh" in args.meshers:
+            results["paper_scale"] = paper_scale(args.repeats, Path(folder))
     results["seconds"] = time.perf_counter() - begin
     results["machine"]["load_average_end"] = list(os.getloadavg())
     results["scaling"] = scaling(results)
+    results["targets"] = targets(results)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.plot:
         plot_scaling(results, args.out / "scaling.png")

@@ -83,6 +83,38 @@ def test_tables_and_plot(tiny):
     assert [r["mesher"] for r in results["scaling"]] == list(MESHERS)
 
 
+def test_paper_scale_and_targets(tiny):
+    """The paper-scale example is timed end to end, and every target row is the comparison it names."""
+    out, results = tiny
+    paper = results["paper_scale"]
+    assert 5_000 < paper["tets"] < 9_000 and paper["repeats"] == 1
+    assert 0 < paper["mesh"]["median"] <= paper["mesh_and_files"]["median"]
+    assert set(paper["mesh"]["stages"]) >= set(MESH_STAGES["fuzzymesh"])
+    (row,) = results["rows"]
+    ours, hxt = row["meshers"]["fuzzymesh"], row["meshers"]["gmsh-hxt"]
+    by_name = {t["target"].split(":")[0]: t for t in results["targets"]}
+    assert by_name["junction-centre x8"]["met"] == (ours["min_dihedral"] >= hxt["min_dihedral"])
+    paper_target = next(t for t in results["targets"] if t["target"].startswith("paper scale"))
+    assert paper_target["met"] == (paper["mesh"]["median"] < 1.0)
+    text = (out / "results.md").read_text()
+    assert all(t["target"] in text for t in results["targets"])
+
+
+def test_targets_of_a_1m_row():
+    """At the 1M tier: time against Gmsh Delaunay, memory against 2 GB, angle against HXT."""
+    from results import targets
+
+    row = {"case": "junction-edge", "tier": "1M", "meshers": {
+        "fuzzymesh": {"mesh_seconds": 20.0, "analysis_seconds": 6.0, "peak_mb": 900, "peak_mb_pipeline": 2100,
+                      "min_dihedral": 20.0},
+        "gmsh-delaunay": {"mesh_seconds": 25.0, "min_dihedral": 11.0},
+        "gmsh-hxt": {"mesh_seconds": 3.0, "min_dihedral": 20.5}}}
+    met = {t["target"]: t["met"] for t in targets({"rows": [row]})}
+    assert met == {"junction-edge 1M: meshing time <= Gmsh Delaunay's": True,
+                   "junction-edge 1M: peak memory <= 2048 MB": False,
+                   "junction-edge 1M: min dihedral >= Gmsh HXT's": False}
+
+
 def test_missing_gmsh_is_one_line(monkeypatch):
     import importlib.util
 
