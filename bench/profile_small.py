@@ -1,7 +1,8 @@
-"""Where the time of a small ``fuzzymesh mesh`` goes: the paper's scale, the junction near the plate edge at
-the uniform size 9.3 (about 6,900 tetrahedra; the paper's mesh has 6,896).
+"""Where the time of a ``fuzzymesh mesh`` goes: by default the paper's scale, the junction near the plate edge
+at the uniform size 9.3 (about 6,900 tetrahedra; the paper's mesh has 6,896); with ``--scale S`` the
+benchmark's junction-edge case (bench/cases.py) with every size x S (S = 1: about 1M tetrahedra).
 
-    python bench/profile_small.py [--size 9.3] [--repeats 3] [--profile]
+    python bench/profile_small.py [--size 9.3 | --scale 1] [--repeats 3] [--profile]
 
 Runs what ``fuzzymesh mesh --size SIZE`` runs (imports, the pipeline, the files: VTU, MSH, audit, report),
 each time in a fresh process, and prints the medians of the wall time, of the imports and of every pipeline
@@ -23,17 +24,24 @@ import time
 ENTRIES = [
     ("imports (wherever they happen)", "<frozen importlib._bootstrap>", "_find_and_load"),
     ("numba: load cached kernels or compile", "numba/core/dispatcher.py", "_compile_for_args"),
+    ("packing: start (curves, patches, volume)", "engine/packing/bubble.py", "_initial"),
     ("packing: force kernel", "engine/packing/forces.py", "forces"),
+    ("packing: neighbour lists", "engine/packing/forces.py", "neighbour_lists"),
+    ("packing: projection onto curves, patches", "engine/packing/constraints.py", "closest"),
+    ("packing: population control", "engine/packing/bubble.py", "_control"),
     ("sizing: element-count estimate", "engine/sizing.py", "estimate_counts"),
     ("meshing: Gmsh constrained Delaunay", "engine/meshing/tetra.py", "tetrahedralize"),
+    ("meshing: surface triangulation", "engine/meshing/surface.py", "triangulate_boundary"),
     ("meshing: Gmsh optimiser", "engine/meshing/improve.py", "gmsh_optimize"),
+    ("meshing: node relocation", "engine/meshing/improve.py", "relocate"),
     ("boundary: pymeshlab report", "engine/quality.py", "boundary_report"),
+    ("output: VTU (meshio, zlib)", "meshio/vtu/_vtu.py", "write"),
     ("output: report HTML (matplotlib)", "engine/report.py", "render_html"),
     ("output: all files", "engine/io.py", "write_mesh"),
 ]
 
 
-def once(size: float, profile: str | None) -> dict:
+def once(size: float, scale: float | None, profile: str | None) -> dict:
     """One run in this process: seconds of the imports, of every stage and of the whole."""
     import cProfile
     import dataclasses
@@ -44,11 +52,16 @@ def once(size: float, profile: str | None) -> dict:
     if profiler:
         profiler.enable()
     begin = time.perf_counter()
-    from engine.job import default_job
+    from engine.job import default_job, job_from_dict
     from engine.pipeline import run
     imports = time.perf_counter() - begin
+    if scale is None:
+        job = dataclasses.replace(default_job(), size=size)
+    else:
+        from cases import junction_job
+        job = job_from_dict(junction_job("junction-edge", scale))
     with tempfile.TemporaryDirectory() as out:
-        result = run(dataclasses.replace(default_job(), size=size, output_dir=out))
+        result = run(dataclasses.replace(job, output_dir=out))
     wall = time.perf_counter() - begin
     if profiler:
         profiler.disable()
@@ -67,22 +80,25 @@ def entries(path: str) -> list[tuple[str, float]]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=float, default=9.3)
+    parser.add_argument("--scale", type=float, help="the junction-edge benchmark case, every size x SCALE")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--profile", action="store_true")
     parser.add_argument("--once", metavar="PROFILE_PATH", nargs="?", const="", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.once is not None:
-        print(json.dumps(once(args.size, args.once or None)))
+        print(json.dumps(once(args.size, args.scale, args.once or None)))
         return
 
     def fresh(profile=""):
-        done = subprocess.run([sys.executable, __file__, "--size", str(args.size), "--once", profile],
+        scale = ["--scale", str(args.scale)] if args.scale is not None else []
+        done = subprocess.run([sys.executable, __file__, "--size", str(args.size), *scale, "--once", profile],
                               capture_output=True, text=True, check=True)
         return json.loads(done.stdout.splitlines()[-1])
 
     runs = [fresh() for _ in range(args.repeats)]
     median = statistics.median
-    print(f"fuzzymesh mesh --size {args.size}: {runs[0]['tets']:,} tets; medians of {args.repeats} fresh processes")
+    what = f"junction-edge x {args.scale:g}" if args.scale is not None else f"fuzzymesh mesh --size {args.size}"
+    print(f"{what}: {runs[0]['tets']:,} tets; medians of {args.repeats} fresh processes")
     walls = [r["wall"] for r in runs]
     print(f"  whole run {median(walls):.2f} s (runs: {', '.join(f'{w:.2f}' for w in walls)})")
     print(f"  imports of engine.pipeline {median(r['imports'] for r in runs):.2f} s")
