@@ -260,6 +260,54 @@ def cracked_plate(length: float, width: float, thickness: float, crack: str, cra
                  lengths=dict(thickness=thickness, crack_length=crack_length))
 
 
+def sphere_segments() -> int:
+    """Segments for a manifold3d sphere whose triangles lie within CHORDAL_ERROR x radius of it.
+
+    Its triangles are wider than the steps along its great circles, so the circle's count is raised
+    (the sagitta falls as 1 / segments^2) until the measured deviation of the face centroids is small enough.
+    """
+    segments = segments_for()
+    while True:
+        mesh = m3.Manifold.sphere(1.0, segments).to_mesh()
+        sagitta = 1 - np.linalg.norm(mesh.vert_properties[mesh.tri_verts, :3].mean(axis=1), axis=1).min()
+        if sagitta <= CHORDAL_ERROR:
+            return segments
+        segments = int(4 * math.ceil(segments * math.sqrt(sagitta / CHORDAL_ERROR) / 4))
+
+
+def spherical_patch(centre, radius: float, tol: float) -> Callable:
+    centre = np.asarray(centre, float)
+
+    def test(patch):
+        dist = np.linalg.norm(patch.vertices - centre, axis=1)
+        return not patch.planar and bool(np.all(np.abs(dist - radius) < tol + CHORDAL_ERROR * radius))
+    return test
+
+
+def hollow_sphere_octant(inner_radius: float, outer_radius: float) -> Shape:
+    """One eighth (x, y, z >= 0) of a thick hollow sphere centred on the origin, for Lamé's problem.
+
+    Names: ``inner`` and ``outer`` (the spherical surfaces), ``symmetry-x`` (the face on the plane
+    x = 0), ``symmetry-y`` and ``symmetry-z``.
+    """
+    a, b = inner_radius, outer_radius
+    if a >= b:
+        raise JobError("the inner radius is not smaller than the outer radius",
+                       fix="make 'inner_radius' smaller than 'outer_radius'")
+    segments = sphere_segments()
+    shell = m3.Manifold.sphere(b, segments) - m3.Manifold.sphere(a, segments)
+    solid = shell ^ m3.Manifold.cube([2 * b, 2 * b, 2 * b])
+    tol = _tol(b)
+    rules = [NameRule("inner", "patch", spherical_patch([0, 0, 0], a, tol)),
+             NameRule("outer", "patch", spherical_patch([0, 0, 0], b, tol)),
+             NameRule("symmetry-x", "patch", plane_patch(0, 0.0, -1, tol)),
+             NameRule("symmetry-y", "patch", plane_patch(1, 0.0, -1, tol)),
+             NameRule("symmetry-z", "patch", plane_patch(2, 0.0, -1, tol))]
+    return Shape("hollow_sphere_octant", dict(inner_radius=a, outer_radius=b),
+                 _geometry(solid, "hollow_sphere_octant"), rules,
+                 lengths=dict(inner_radius=a, outer_radius=b, thickness=b - a))
+
+
 def _p(default, doc, check=positive):
     return Field(NUMBER, default=default, check=check, doc=doc)
 
@@ -288,6 +336,8 @@ SHAPES = {
                        doc="crack front shape"),
         "crack_length": _p(20.0, "crack length (straight) or half-length (semi-elliptical)"),
         "crack_depth": _p(10.0, "depth of the semi-elliptical crack into the thickness")}),
+    "hollow_sphere_octant": (hollow_sphere_octant, {
+        "inner_radius": _p(50.0, "inner radius"), "outer_radius": _p(100.0, "outer radius")}),
 }
 
 

@@ -36,7 +36,7 @@ def write_job(tmp_path, data):
 
 
 SIZES = {"cylinder": 5.0, "plate": 20.0, "plate_with_hole": 6.0, "plate_cylinder_junction": 12.0,
-         "l_bracket": 6.0, "cracked_plate": 12.0}
+         "l_bracket": 6.0, "cracked_plate": 12.0, "hollow_sphere_octant": 10.0}
 
 
 @pytest.mark.parametrize("kind", sorted(SHAPES))
