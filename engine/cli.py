@@ -97,6 +97,23 @@ def build_parser() -> argparse.ArgumentParser:
                              "longest and shortest extents, at the median node)")
     report.set_defaults(run=_cmd_report)
 
+    from .validation import CASES
+
+    validate = commands.add_parser("validate", help="solve linear elasticity on a mesh and compare with a published "
+                                   "solution (needs the 'fe' extra)",
+                                   description="plate-hole: Peterson's Kt of a plate with a central hole in tension, "
+                                               "meshed by the static-stress recipe; sphere: Lamé's thick hollow sphere "
+                                               "under internal pressure. Prints the table; see docs/validation.md")
+    validate.add_argument("case", metavar="NAME", choices=list(CASES), help=f"one of {', '.join(CASES)}")
+    validate.add_argument("--scale", type=_positive_float, default=1.0,
+                          help="multiply every element size by this (default 1; 3: a coarse mesh in seconds)")
+    validate.add_argument("--seed", type=_seed, default=0, help="random seed of the mesh")
+    validate.add_argument("--study", action="store_true",
+                          help="plate-hole: the convergence study, Kt error against nodes for the recipe's graded mesh "
+                               "and a uniform mesh (minutes); writes fe_convergence.json, .md, .png to --out")
+    validate.add_argument("--out", type=Path, default=Path("validation-out"), help="--study: output folder")
+    validate.set_defaults(run=_cmd_validate)
+
     for noun in ("patterns", "recipes"):
         sub = commands.add_parser(noun, help=f"list or show the {noun} of the knowledge base")
         verbs = sub.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
@@ -191,6 +208,31 @@ def _cmd_report(args) -> int:
             raise JobError(f"'{name}{suffix}' is missing", where=str(args.out),
                            fix="mesh again with 'vtu' among output.formats")
     for path in write_report(args.out, name, args.cut):
+        print(f"wrote {path}")
+    return 0
+
+
+def _cmd_validate(args) -> int:
+    from .validation import require_fe, run_case
+
+    require_fe()
+    logging.getLogger().setLevel(logging.WARNING)
+    if not args.study:
+        print(run_case(args.case, args.scale, args.seed).table())
+        return 0
+    if args.case != "plate-hole":
+        raise FuzzymeshError(f"the convergence study is for plate-hole, not {args.case}",
+                             fix="run 'fuzzymesh validate plate-hole --study'")
+    from .validation.study import run_study, write_study
+
+    def progress(row):
+        print(f"{row['series']} x {row['scale']:g}: {row['nodes']:,} nodes, Kt {row['Kt']:.4f} "
+              f"({100 * row['error']:+.2f} %), {sum(row['seconds'].values()):.0f} s", file=sys.stderr, flush=True)
+
+    study = run_study(seed=args.seed, progress=progress)
+    paths = write_study(study, args.out)
+    print(paths[1].read_text())
+    for path in paths:
         print(f"wrote {path}")
     return 0
 
