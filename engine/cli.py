@@ -111,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--study", action="store_true",
                           help="plate-hole: the convergence study, Kt error against nodes for the recipe's graded mesh "
                                "and a uniform mesh (minutes); writes fe_convergence.json, .md, .png to --out")
+    validate.add_argument("--seeds", type=int, default=3, metavar="N",
+                          help="--study: mesh every scale with seeds 0 .. N-1 (default 3)")
     validate.add_argument("--out", type=Path, default=Path("validation-out"), help="--study: output folder")
     validate.set_defaults(run=_cmd_validate)
 
@@ -223,13 +225,15 @@ def _cmd_validate(args) -> int:
     if args.case != "plate-hole":
         raise FuzzymeshError(f"the convergence study is for plate-hole, not {args.case}",
                              fix="run 'fuzzymesh validate plate-hole --study'")
+    if args.seeds < 1:
+        raise FuzzymeshError(f"--seeds must be at least 1, got {args.seeds}", fix="e.g. --seeds 3")
     from .validation.study import run_study, write_study
 
     def progress(row):
-        print(f"{row['series']} x {row['scale']:g}: {row['nodes']:,} nodes, Kt {row['Kt']:.4f} "
+        print(f"{row['series']} x {row['scale']:g}, seed {row['seed']}: {row['nodes']:,} nodes, Kt {row['Kt']:.4f} "
               f"({100 * row['error']:+.2f} %), {sum(row['seconds'].values()):.0f} s", file=sys.stderr, flush=True)
 
-    study = run_study(seed=args.seed, progress=progress)
+    study = run_study(seeds=range(args.seeds), progress=progress)
     paths = write_study(study, args.out)
     print(paths[1].read_text())
     for path in paths:

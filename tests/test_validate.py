@@ -111,18 +111,25 @@ def test_nodes_at_target_interpolates_where_the_series_stays_within():
     assert nodes_at(rows[2:3] + rows[4:]) is None           # within 3 % from its coarsest mesh: not bracketed
 
 
-def test_study_writes_table_json_and_a_small_plot(tmp_path):
-    from engine.validation.study import markdown, write_study
+def test_study_averages_the_seeds_and_writes_table_json_and_a_small_plot(tmp_path):
+    from engine.validation.study import means, nodes_at, write_study
 
-    rows = [{"series": s, "scale": k, "size": 5.6 * k, "nodes": n, "tetrahedra": 5 * n, "dofs": 20 * n, "Kt": 2.5,
-             "Kt_mid": 2.6, "error": e, "seconds": {"mesh": 1.0}}
-            for s, k, n, e in (("graded", 4, 250, -0.05), ("graded", 3, 400, -0.01), ("uniform", 1.5, 600, -0.06),
-                               ("uniform", 1, 1700, -0.02))]
-    study = {"case": "plate-hole", "target": 0.03, "Kt_peterson": 2.508, "rows": rows,
-             "nodes_at_target": {"graded": 300.0, "uniform": 1200.0}, "ratio": 4.0}
+    rows = [{"series": s, "scale": k, "size": 5.6 * k, "nodes": n, "Kt": 2.5, "error": e, "seconds": {"mesh": 1.0},
+             "seed": seed}
+            for s, k, n, e, seed in (("graded", 4, 250, -0.05, 0), ("graded", 4, 260, -0.03, 1),
+                                     ("graded", 3, 400, -0.01, 0), ("graded", 3, 420, -0.02, 1),
+                                     ("uniform", 1.5, 600, -0.06, 0), ("uniform", 1.5, 640, -0.04, 1),
+                                     ("uniform", 1, 1700, -0.02, 0), ("uniform", 1, 1720, 0.0, 1))]
+    series = {name: means([r for r in rows if r["series"] == name]) for name in ("graded", "uniform")}
+    assert [(p["scale"], p["nodes"], p["error"], p["error_min"]) for p in series["graded"]] == \
+        [(4, 255, pytest.approx(-0.04), -0.05), (3, 410, pytest.approx(-0.015), -0.02)]
+    at = {name: nodes_at(points) for name, points in series.items()}
+    study = {"case": "plate-hole", "target": 0.03, "Kt_peterson": 2.508, "seeds": [0, 1], "rows": rows,
+             "series": series, "nodes_at_target": at, "ratio": at["uniform"] / at["graded"]}
     paths = write_study(study, tmp_path)
-    assert json.loads(paths[0].read_text())["ratio"] == 4.0
-    assert "| graded | 4 |" in paths[1].read_text() and "4.0 times as many nodes" in markdown(study)
+    assert json.loads(paths[0].read_text())["series"]["uniform"][1]["nodes"] == 1710
+    table = paths[1].read_text()
+    assert "| graded | 4 | 22.4 | 255 |" in table and f"{study['ratio']:.1f} times as many nodes" in table
     assert paths[2].read_bytes()[:4] == b"\x89PNG" and paths[2].stat().st_size < 200_000
 
 

@@ -132,7 +132,7 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
     model, d_over_w = solved["model"], 2 * PLATE["hole_radius"] / PLATE["width"]
     reference = peterson_kt(d_over_w)
     facts = {"nodes": model.nodes, "tetrahedra": len(result.mesh.tets), "quadratic nodes": len(model.points),
-             "dofs": model.basis.N, "CG iterations": solved["solver"]["iterations"],
+             "dofs": int(model.basis.N), "CG iterations": solved["solver"]["iterations"],
              "max reaction / load": solved["solver"]["reaction"] / solved["load"],
              "mesh s": round(meshing, 1), "assemble s": round(solved["timings"]["assemble"], 1),
              "solve s": round(solved["timings"]["solve"], 1)}

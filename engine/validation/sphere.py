@@ -74,7 +74,7 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
     solved = solve_sphere(result)
     model = solved["model"]
     facts = {"nodes": model.nodes, "tetrahedra": len(result.mesh.tets), "quadratic nodes": len(model.points),
-             "dofs": model.basis.N, "CG iterations": solved["solver"]["iterations"], "mesh s": round(meshing, 1),
+             "dofs": int(model.basis.N), "CG iterations": solved["solver"]["iterations"], "mesh s": round(meshing, 1),
              "assemble s": round(solved["timings"]["assemble"], 1), "solve s": round(solved["timings"]["solve"], 1)}
     title = (f"sphere: thick hollow sphere a = {INNER:g}, b = {OUTER:g} (octant, symmetry planes), internal "
              f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:g}; 10-node tets")
