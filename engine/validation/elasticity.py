@@ -1,12 +1,13 @@
 """Linear elasticity with quadratic tetrahedra (scikit-fem) on a fuzzymesh mesh.
 
-The model is the mesh's 10-node form (``engine.fe.quadratic``: boundary mid-edge nodes on the true
-surface) as a curved scikit-fem ``MeshTet2`` with ``ElementVector(ElementTetP2())``: isoparametric
-quadratic tetrahedra. Boundary conditions are applied by patch and corner names, through the mesh's
-boundary triangles tagged by patch, never by coordinates. The system is solved by conjugate gradients
-preconditioned with smoothed-aggregation algebraic multigrid (pyamg, rigid-body modes as near null
-space). Stresses are recovered at the nodes by averaging, over the elements that share a node, each
-element's own stress at that node (the usual "averaged nodal stress" of FE post-processors).
+The model is the mesh's 10-node form (``engine.fe.quadratic``'s elements, the nodes of curved patches
+on their exact surfaces: see :func:`build`) as a curved scikit-fem ``MeshTet2`` with
+``ElementVector(ElementTetP2())``: isoparametric quadratic tetrahedra. Boundary conditions are applied
+by patch and corner names, through the mesh's boundary triangles tagged by patch, never by coordinates.
+The system is solved by conjugate gradients preconditioned with smoothed-aggregation algebraic multigrid
+(pyamg, rigid-body modes as near null space). Stresses are recovered at the nodes by averaging, over the
+elements that share a node, each element's own stress at that node (the usual "averaged nodal stress"
+of FE post-processors).
 
 Needs the ``fe`` extra (scikit-fem, pyamg); :func:`engine.validation.require_fe` checks it first.
 """
@@ -44,8 +45,8 @@ class Material:
 class Model:
     """A meshed solid as quadratic finite elements.
 
-    ``points``/``tets10``/``triangles6`` are the 10-node mesh (``engine.fe.quadratic``; the linear
-    mesh's nodes first); ``dof[k]`` is the scikit-fem scalar degree of freedom at node k, so component
+    ``points``/``tets10``/``triangles6`` are the 10-node mesh (see :func:`build`; the linear mesh's
+    nodes first); ``dof[k]`` is the scikit-fem scalar degree of freedom at node k, so component
     c of the displacement there is ``3 * dof[k] + c``.
     """
 

@@ -38,6 +38,7 @@ def lame(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def job(scale: float = 1.0, seed: int = 0) -> dict:
+    """The octant's job: the base pattern alone, h = (b - a) / LAYERS x ``scale``."""
     return {"geometry": {"shape": "hollow_sphere_octant",
                          "parameters": {"inner_radius": INNER, "outer_radius": OUTER}},
             "size": scale * (OUTER - INNER) / LAYERS, "seed": seed}
@@ -77,11 +78,13 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
              "dofs": int(model.basis.N), "CG iterations": solved["solver"]["iterations"], "mesh s": round(meshing, 1),
              "assemble s": round(solved["timings"]["assemble"], 1), "solve s": round(solved["timings"]["solve"], 1)}
     title = (f"sphere: thick hollow sphere a = {INNER:g}, b = {OUTER:g} (octant, symmetry planes), internal "
-             f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:g}; 10-node tets")
+             f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:.3g}; 10-node tets")
     rows = []
-    for quantity, radius, key, index in (("u_r at r = a", INNER, "inner", 0), ("hoop stress at r = a", INNER, "inner", 2),
-                                         ("u_r at r = b", OUTER, "outer", 0), ("hoop stress at r = b", OUTER, "outer", 2)):
-        values, exact = solved[key][{0: "u_r", 2: "hoop"}[index]], lame(solved[key]["r"])[index]
+    for quantity, radius, surface, field, index in (("u_r at r = a", INNER, "inner", "u_r", 0),
+                                                    ("hoop stress at r = a", INNER, "inner", "hoop", 2),
+                                                    ("u_r at r = b", OUTER, "outer", "u_r", 0),
+                                                    ("hoop stress at r = b", OUTER, "outer", "hoop", 2)):
+        values, exact = solved[surface][field], lame(solved[surface]["r"])[index]
         reference = float(lame(radius)[index])
         deviation = values - exact
         worst = deviation[np.argmax(np.abs(deviation))]

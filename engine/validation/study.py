@@ -71,8 +71,9 @@ def run_study(graded=GRADED_SCALES, uniform=UNIFORM_SCALES, seeds=SEEDS, progres
     series = {name: means([r for r in rows if r["series"] == name]) for name in ("graded", "uniform")}
     at = {name: nodes_at(points) for name, points in series.items()}
     ratio = at["uniform"] / at["graded"] if at["graded"] and at["uniform"] else None
-    return {"case": "plate-hole", "target": TARGET, "Kt_peterson": peterson_kt(2 * PLATE["hole_radius"] / PLATE["width"]),
-            "seeds": list(seeds), "rows": rows, "series": series, "nodes_at_target": at, "ratio": ratio}
+    reference = peterson_kt(2 * PLATE["hole_radius"] / PLATE["width"])
+    return {"case": "plate-hole", "target": TARGET, "Kt_peterson": reference, "seeds": list(seeds), "rows": rows,
+            "series": series, "nodes_at_target": at, "ratio": ratio}
 
 
 def means(rows: list[dict]) -> list[dict]:
@@ -82,7 +83,8 @@ def means(rows: list[dict]) -> list[dict]:
         group = [r for r in rows if r["scale"] == scale]
         errors = [r["error"] for r in group]
         out.append({"scale": scale, "size": group[0]["size"], "meshes": len(group),
-                    "nodes": float(np.mean([r["nodes"] for r in group])), "Kt": float(np.mean([r["Kt"] for r in group])),
+                    "nodes": float(np.mean([r["nodes"] for r in group])),
+                    "Kt": float(np.mean([r["Kt"] for r in group])),
                     "error": float(np.mean(errors)), "error_min": min(errors), "error_max": max(errors),
                     "seconds": float(np.mean([sum(r["seconds"].values()) for r in group]))})
     return out
@@ -105,14 +107,16 @@ def markdown(study: dict) -> str:
              "", f"Peterson's Kt (net section, d/W = 0.2): {study['Kt_peterson']:.4f}. Each scale meshed with seeds "
              f"{', '.join(map(str, study['seeds']))}; means over the seeds. Made by `fuzzymesh validate plate-hole "
              "--study`; see docs/validation.md.", "",
-             "| series | scale | global size | nodes | Kt (thickness mean) | error | error range over the seeds | seconds |",
+             "| series | scale | global size | nodes | Kt (thickness mean) | error | error range over the seeds "
+             "| seconds |",
              "|---|---|---|---|---|---|---|---|"]
     for name, points in study["series"].items():
         for p in points:
             lines.append(f"| {name} | {p['scale']:g} | {p['size']:.3g} | {p['nodes']:,.0f} | {p['Kt']:.4f} | "
                          f"{100 * p['error']:+.2f} % | {100 * p['error_min']:+.2f} to {100 * p['error_max']:+.2f} % | "
                          f"{p['seconds']:.0f} |")
-    lines += ["", f"Nodes from which the |mean error| stays within {100 * study['target']:g} % (log-log interpolation): "
+    lines += ["", f"Nodes from which the |mean error| stays within {100 * study['target']:g} % "
+              "(log-log interpolation): "
               f"graded {_count(at['graded'])}, uniform {_count(at['uniform'])}"
               + (f"; the uniform mesh needs {study['ratio']:.1f} times as many nodes." if study["ratio"] else "."), ""]
     return "\n".join(lines)
