@@ -91,8 +91,15 @@ def curve_edges(mesh: TetMesh, features) -> tuple[np.ndarray, np.ndarray]:
     for row in np.flatnonzero(curve < 0):
         key = tuple(sorted(corner_vertex[entity[row]].tolist()))
         curve[row] = ends.get(key, -1)
-    # both nodes on the same curve (or an end corner): a chord of the curve, not a diagonal across a patch
-    same = np.where(level == CURVE, entity, curve[:, None]) == curve[:, None]
+    # both nodes on the same curve, a corner only where it ends the curve: a chord of the curve, not a
+    # diagonal across a patch from a corner that ends another curve
+    corner_of_vertex = {int(v): k for k, v in enumerate(corner_vertex)}
+    curves = len(features.curves)
+    end_keys = np.array([corner_of_vertex[int(v)] * curves + index for index, c in enumerate(features.curves)
+                         if c.vertices is not None and len(c.vertices)
+                         for v in (c.vertices[0], c.vertices[-1]) if int(v) in corner_of_vertex], dtype=np.int64)
+    ends_curve = np.isin(entity * curves + curve[:, None], end_keys)
+    same = np.where(level == CURVE, entity == curve[:, None], ends_curve)
     keep = (curve >= 0) & same.all(axis=1)
     return edges[keep], curve[keep]
 

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from engine.cli import main
-from engine.fe import feature_groups, min_jacobian, quadratic
+from engine.fe import curve_edges, feature_groups, min_jacobian, quadratic, row_index
 from engine.io import ABAQUS_FACE
 from engine.mesh import NODE_LEVELS
 from engine.meshing.surface import arc_parameter
@@ -117,3 +117,29 @@ def test_nastran_and_med_hold_the_same_mesh(root):
         assert np.array_equal(other.cells_dict["tetra"], vtu.cells_dict["tetra"]), name
     med = meshio.read(out / "mesh.med")
     assert np.allclose(med.cell_data["h_target"][0], vtu.cell_data["h_target"][0]), "the audit travels in MED"
+
+
+def test_mid_edge_nodes_on_flat_faces_stay_at_the_midpoint():
+    """A corner counts as on a curve only where it ends that curve: an edge from a box corner to a node of
+    another box edge is a diagonal of a flat face, and its mid-node stays at the edge's midpoint; only
+    chords of a feature curve (here the hole's rims) bend on a flat face."""
+    from engine.job import job_from_dict
+    from engine.pipeline import run
+
+    job = job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 16.79, "place": [
+        {"pattern": "uniform-domain"}, {"pattern": "hole", "every": "hole", "parameters": {"near": 0.375, "far": 3.0}}]})
+    result = run(job, write=False)
+    mesh, features = result.mesh, result.features
+    chords, curve = curve_edges(mesh, features)
+    corner = mesh.node_level[chords] == NODE_LEVELS.index("corner")
+    ends = np.array([[features.curves[c].points[0], features.curves[c].points[-1]] for c in curve])
+    gap = np.linalg.norm(mesh.points[chords][:, :, None] - ends[:, None], axis=3).min(axis=2)
+    assert corner.any() and (gap[corner] < 1e-9 * result.geometry.scale).all(), "corners end their curve"
+    points, _, triangles6 = quadratic(mesh, result.geometry, features)
+    planar = np.array([p.planar for p in features.patches])[mesh.boundary_patch]
+    edges = triangles6[planar][:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
+    middle = triangles6[planar][:, 3:].ravel()
+    not_chord = row_index(np.sort(chords, axis=1), np.sort(edges, axis=1)) < 0
+    offset = np.linalg.norm(points[middle] - points[edges].mean(axis=1), axis=1)
+    assert offset[~not_chord].max() > 0.01, "the rims' chords bend onto the circles"
+    assert offset[not_chord].max() < 1e-9 * result.geometry.scale
