@@ -20,7 +20,7 @@ import numpy as np
 from ..mesh import STEINER, TetMesh
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
-from .improve import FLOOR, gmsh_optimize, min_dihedrals, peel_boundary_slivers, quality_below, relocate
+from .improve import FLOOR, TARGET, gmsh_optimize, min_dihedrals, peel_boundary_slivers, quality_below, relocate
 from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
@@ -60,9 +60,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     points, tets = gmsh_optimize(points, tets, fixed)
     slide = _slide_directions(points, level, entity, geometry, features)
     points, moves = relocate(points, tets, slide[0], seed)
-    if (quality_below(points, tets, FLOOR)).any():   # last resort: curved-patch nodes slide too
+    if (quality_below(points, tets, TARGET)).any():   # last pass: curved-patch nodes slide too
         unslid = points
-        points, more = relocate(points, tets, slide[1], seed, target=FLOOR)
+        points, more = relocate(points, tets, slide[1], seed)
         moves += more
         slid = np.flatnonzero((level == PATCH) & np.any(points != unslid, axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
