@@ -14,7 +14,6 @@ import igl
 from scipy.spatial import cKDTree
 
 from .errors import KnowledgeError
-from .inside import surface_samples
 from .schema import LIST, NUMBER, Field, check_value, positive
 
 WORKERS = -1   # k-d tree queries use every core
@@ -81,6 +80,26 @@ def patch_distance(geometry, patch, spacing: float) -> FeatureDistance:
 def curve_samples(curve, spacing: float) -> np.ndarray:
     count = int(min(2_000_000, max(2, np.ceil(curve.length / spacing) + 1)))
     return curve.point_at(np.linspace(0.0, curve.length, count))
+
+
+def _barycentric_grid(n: int) -> np.ndarray:
+    """Barycentric coordinates of the (n+1)(n+2)/2 points of a triangle subdivided n times."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    keep = i + j <= n
+    i, j = i[keep], j[keep]
+    return np.column_stack([n - i - j, i, j]).astype(float) / n
+
+
+def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on the surface such that every surface point is within ``spacing`` of one."""
+    tri = vertices[faces]
+    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+    subdiv = np.maximum(1, np.ceil(edge / spacing)).astype(int)
+    chunks = [vertices[np.unique(faces)]]
+    for n in np.unique(subdiv[subdiv > 1]):
+        bary = _barycentric_grid(int(n))
+        chunks.append(np.einsum("bk,fkd->fbd", bary, tri[subdiv == n]).reshape(-1, 3))
+    return np.concatenate(chunks)
 
 
 MAX_PATCH_SAMPLES = 2_000_000

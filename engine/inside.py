@@ -16,26 +16,6 @@ from scipy import ndimage
 from ._numba import numba
 
 
-def _barycentric_grid(n: int) -> np.ndarray:
-    """Barycentric coordinates of the (n+1)(n+2)/2 points of a triangle subdivided n times."""
-    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    keep = i + j <= n
-    i, j = i[keep], j[keep]
-    return np.column_stack([n - i - j, i, j]).astype(float) / n
-
-
-def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
-    """Points on the surface such that every surface point is within ``spacing`` of one."""
-    tri = vertices[faces]
-    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-    subdiv = np.maximum(1, np.ceil(edge / spacing)).astype(int)
-    chunks = [vertices[np.unique(faces)]]
-    for n in np.unique(subdiv[subdiv > 1]):
-        bary = _barycentric_grid(int(n))
-        chunks.append(np.einsum("bk,fkd->fbd", bary, tri[subdiv == n]).reshape(-1, 3))
-    return np.concatenate(chunks)
-
-
 class InsideGrid:
     """Inside test for a closed surface, accelerated by a voxel grid.
 
