@@ -110,11 +110,9 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     Mid-edge nodes of boundary edges are moved onto the input surface (onto
     their feature curve for curve edges); where an element's Jacobian would
     turn non-positive its mid-edge nodes move only part of the way (straight
-    at last), so every Jacobian is positive.
+    at last, :func:`limit_curving`), so every Jacobian is positive.
     """
-    edges = np.sort(mesh.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
-    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
+    unique, tets10, triangles6 = quadratic_elements(mesh)
     straight = mesh.points[unique].mean(axis=1)
     curved = straight.copy()
     boundary_edges = np.unique(np.sort(mesh.boundary[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1), axis=0)
@@ -126,16 +124,32 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     for c in np.unique(curve):
         rows = chord_row[(curve == c) & (chord_row >= 0)]
         curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
+    points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10)
+    return points, tets10, triangles6
+
+
+def quadratic_elements(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 10-node connectivity of a linear mesh: (unique edges (e, 2), tets10, boundary triangle6).
+
+    Mid-edge node k of the quadratic mesh is ``len(mesh.points) + k``, on edge ``unique[k]``.
+    """
+    edges = np.sort(mesh.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
+    unique, inverse = np.unique(edges, axis=0, return_inverse=True)
     tets10 = np.hstack([mesh.tets, len(mesh.points) + inverse.reshape(-1, 6)])
-    for attempt in range(CURVING_ATTEMPTS + 1):   # halve the curving of elements that would fold
-        points = np.vstack([mesh.points, curved])
+    return unique, tets10, _boundary_triangle6(mesh.boundary, unique, len(mesh.points))
+
+
+def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray) -> np.ndarray:
+    """``curved`` node positions, except that the nodes of elements whose Jacobian would turn non-positive
+    move only half as far from ``straight`` (up to CURVING_ATTEMPTS times), and at last not at all."""
+    points = curved.copy()
+    for attempt in range(CURVING_ATTEMPTS + 1):
         bad = np.flatnonzero(min_jacobian(points, tets10) <= 0)
         if len(bad) == 0:
             break
-        rows = np.unique(tets10[bad, 4:]) - len(mesh.points)
-        curved[rows] = straight[rows] if attempt == CURVING_ATTEMPTS else (curved[rows] + straight[rows]) / 2
-    triangles6 = _boundary_triangle6(mesh.boundary, unique, len(mesh.points))
-    return points, tets10, triangles6
+        rows = np.unique(tets10[bad])
+        points[rows] = straight[rows] if attempt == CURVING_ATTEMPTS else (points[rows] + straight[rows]) / 2
+    return points
 
 
 def row_index(table: np.ndarray, rows: np.ndarray) -> np.ndarray:

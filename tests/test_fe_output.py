@@ -143,3 +143,19 @@ def test_mid_edge_nodes_on_flat_faces_stay_at_the_midpoint():
     offset = np.linalg.norm(points[middle] - points[edges].mean(axis=1), axis=1)
     assert offset[~not_chord].max() > 0.01, "the rims' chords bend onto the circles"
     assert offset[not_chord].max() < 1e-9 * result.geometry.scale
+
+
+def test_limit_curving_straightens_what_halving_cannot_unfold():
+    """A mid-edge node pulled far across its element: halving CURVING_ATTEMPTS times still folds it, so it
+    ends straight; a small pull that does not fold is kept as it is."""
+    from engine.fe import CURVING_ATTEMPTS, TET10_EDGES, limit_curving
+
+    corners = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    straight = np.vstack([corners, corners[TET10_EDGES].mean(axis=1)])
+    tets10 = np.arange(10)[None]
+    far, near = straight.copy(), straight.copy()
+    far[4] += [0.0, 0.0, 2.0 ** (CURVING_ATTEMPTS + 3)]     # edge 0-1's mid-node far above the opposite corner
+    near[4] += [0.0, -0.05, 0.0]
+    assert min_jacobian(far, tets10)[0] <= 0 < min_jacobian(near, tets10)[0]
+    assert np.array_equal(limit_curving(straight, far, tets10), straight)
+    assert np.array_equal(limit_curving(straight, near, tets10), near)

@@ -1,6 +1,6 @@
 """Linear elasticity with quadratic tetrahedra (scikit-fem) on a fuzzymesh mesh.
 
-The model is the mesh's 10-node form (``engine.fe.quadratic``'s elements, the nodes of curved patches
+The model is the mesh's 10-node form (``engine.fe.quadratic_elements``, the nodes of curved patches
 on their exact surfaces: see :func:`build`) as a curved scikit-fem ``MeshTet2`` with
 ``ElementVector(ElementTetP2())``: isoparametric quadratic tetrahedra. Boundary conditions are applied
 by patch and corner names, through the mesh's boundary triangles tagged by patch, never by coordinates.
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fe import CORNER, CURVING_ATTEMPTS, TET10_EDGES, min_jacobian, quadratic, row_index
+from ..fe import CORNER, limit_curving, quadratic_elements, row_index
 
 QUADRATURE_ORDER = 2    # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
 TOLERANCE = 1e-10       # relative residual of the conjugate gradients
@@ -123,24 +123,10 @@ def on_sphere(centre, radius: float):
     return project
 
 
-def _unfold(before: np.ndarray, after: np.ndarray, tets10: np.ndarray) -> np.ndarray:
-    """``after``, except that the nodes of elements that would fold move only part of the way from ``before``
-    (halved CURVING_ATTEMPTS times, then not at all), as ``engine.fe.quadratic`` curves its elements."""
-    after = after.copy()
-    moved = np.flatnonzero((after != before).any(axis=1))
-    for attempt in range(CURVING_ATTEMPTS + 1):
-        bad = np.flatnonzero(min_jacobian(after, tets10) <= 0)
-        if len(bad) == 0:
-            break
-        rows = np.intersect1d(tets10[bad], moved)
-        after[rows] = before[rows] if attempt == CURVING_ATTEMPTS else (after[rows] + before[rows]) / 2
-    return after
-
-
 def build(result, exact: dict) -> Model:
     """The quadratic model of a pipeline result (``engine.pipeline.run``).
 
-    The 10-node elements are ``engine.fe.quadratic``'s; their mid-edge nodes are the edges' midpoints,
+    The 10-node elements are ``engine.fe.quadratic_elements``; their mid-edge nodes are the edges' midpoints,
     except that every node of a patch named in ``exact`` (name -> projection onto the patch's exact
     surface, points (k, 3) -> (k, 3)) is moved onto that surface. The input surface is faceted (up to
     0.1 % of a radius off the true one), about as far as a quadratic edge's mid-node lies off its chord
@@ -148,15 +134,13 @@ def build(result, exact: dict) -> Model:
     """
     from skfem import Basis, ElementTetP2, ElementVector, MeshTet2
 
-    _, tets10, triangles6 = quadratic(result.mesh, result.geometry, result.features)
-    straight = np.empty((tets10.max() + 1, 3))
-    straight[:len(result.mesh.points)] = result.mesh.points
-    straight[tets10[:, 4:]] = (straight[tets10[:, TET10_EDGES[:, 0]]] + straight[tets10[:, TET10_EDGES[:, 1]]]) / 2
+    edges, tets10, triangles6 = quadratic_elements(result.mesh)
+    straight = np.vstack([result.mesh.points, result.mesh.points[edges].mean(axis=1)])
     on_surface = straight.copy()
     for name, project in exact.items():
         nodes = np.unique(triangles6[np.isin(result.mesh.boundary_patch, _patches(result, name))])
         on_surface[nodes] = project(straight[nodes])
-    points = _unfold(straight, on_surface, tets10)
+    points = limit_curving(straight, on_surface, tets10)
     mesh = MeshTet2(np.ascontiguousarray(points.T), np.ascontiguousarray(tets10.T))
     basis = Basis(mesh, ElementVector(ElementTetP2()), intorder=QUADRATURE_ORDER)
     dof = np.empty(len(points), np.int64)
