@@ -22,6 +22,7 @@ from .inside import InsideGrid
 log = logging.getLogger(__name__)
 
 SURFACE_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".off": "off", ".glb": "glb"}
+TOUCH = 1e-9   # two shells closer than this times the model size touch
 
 
 @dataclass
@@ -30,7 +31,12 @@ class Geometry:
 
     mesh: trimesh.Trimesh
     source: str
+    face_body: np.ndarray   # the body (separate solid, 0-based) each face bounds; a cavity's is the solid around it
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def bodies(self) -> int:
+        return int(self.face_body.max()) + 1
 
     @property
     def vertices(self) -> np.ndarray:
@@ -122,9 +128,9 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
     """Build a :class:`Geometry` from raw arrays, or raise a one-line GeometryError.
 
     Refused: no triangles, NaN/inf coordinates, open or non-manifold surface,
-    self-intersections, non-orientable surface, zero volume, several solids
-    (unless allowed). Fixed and noted: inconsistent or inside-out orientation,
-    duplicate vertices, degenerate faces.
+    non-orientable surface, shells that touch or overlap, self-intersections,
+    zero volume, several solids (unless allowed). Fixed and noted: inconsistent
+    or inside-out orientation, duplicate vertices, degenerate faces.
     """
     vertices = np.asarray(vertices, dtype=float)
     faces = np.asarray(faces, dtype=np.int64)
@@ -147,9 +153,11 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
         raise GeometryError("the surface has no triangles of non-zero area", where=source,
                             fix="export the solid's boundary")
     _check_closed(mesh, source)
+    notes += _make_consistent(mesh, source)
+    face_shell, depth, shell_body = _shells(mesh, source)
     if check_self_intersections:
-        _check_self_intersections(mesh, source)
-    notes += _orient(mesh, source, allow_multiple_solids)
+        _check_self_intersections(mesh, source, face_shell, shell_body)
+    notes += _orient(mesh, source, face_shell, depth, allow_multiple_solids)
     with np.errstate(divide="ignore", invalid="ignore"):
         volume = float(mesh.volume)
     if not volume > 1e-9 * mesh.scale ** 3:
@@ -157,7 +165,7 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
                             fix="give a solid body, not a sheet or a degenerate surface")
     for note in notes:
         log.warning("%s: %s", source, note)
-    return Geometry(mesh, source, notes)
+    return Geometry(mesh, source, shell_body[face_shell], notes)
 
 
 def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:
@@ -170,53 +178,105 @@ def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:
                             where=source, fix="close the holes in the CAD tool or a mesh repair tool")
     if nonmanifold:
         raise GeometryError(f"the surface is not manifold: {nonmanifold} edges are shared by more than two faces",
-                            where=source, fix="repair the surface so that each edge joins exactly two faces")
+                            where=source, fix="repair the surface so that each edge joins exactly two faces "
+                                                "(bodies that touch along an edge share it: move them apart)")
 
 
-def _check_self_intersections(mesh: trimesh.Trimesh, source: str) -> None:
+def _check_self_intersections(mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray,
+                              shell_body: np.ndarray) -> None:
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces.astype(np.int32)))
     ms.compute_selection_by_self_intersections_per_face()
-    count = ms.current_mesh().selected_face_number()
-    if count:
-        raise GeometryError(f"the surface intersects itself ({count} faces cross other faces)",
+    selected = ms.current_mesh().face_selection_array().astype(bool)
+    shells = np.unique(face_shell[selected])
+    if len(shells) > 1:
+        raise _touch_error(source, shell_body, shells[0], shells[1])
+    if len(shells):
+        raise GeometryError(f"the surface intersects itself ({int(selected.sum())} faces cross other faces)",
                             where=source, fix="union the overlapping bodies or repair the surface")
 
 
-def _orient(mesh: trimesh.Trimesh, source: str, allow_multiple_solids: bool) -> list[str]:
-    """Orient every shell outward (cavities inward); count solids. Mutates ``mesh``."""
-    notes = []
+def _make_consistent(mesh: trimesh.Trimesh, source: str) -> list[str]:
+    """Orient every face consistently with its neighbours. Mutates ``mesh``."""
+    if mesh.is_winding_consistent:
+        return []
+    trimesh.repair.fix_winding(mesh)
     if not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
-        if not mesh.is_winding_consistent:
-            raise GeometryError("the surface cannot be oriented consistently (non-orientable)",
-                                where=source, fix="repair the surface")
-        notes.append("fixed inconsistent face orientation")
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
-    shells = [np.flatnonzero(labels == k) for k in range(labels.max() + 1)]
+        raise GeometryError("the surface cannot be oriented consistently (non-orientable)",
+                            where=source, fix="repair the surface")
+    return ["fixed inconsistent face orientation"]
+
+
+def _shells(mesh: trimesh.Trimesh, source: str):
+    """The closed shells of a consistently wound surface: (shell of every face, numbered by lowest face;
+    depth of every shell inside the others; body of every shell, 0-based in shell order).
+
+    A shell at even depth bounds a body of its own, one at odd depth is a cavity of the body around it.
+    Shells whose bounding boxes overlap are tested against each other, vertex by vertex: a vertex on
+    the other shell (a shared one too) or some but not all vertices inside it make them touch or
+    overlap, which is refused.
+    """
+    n = len(mesh.faces)
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=n)
+    count = int(labels.max()) + 1
+    first = np.full(count, n)
+    np.minimum.at(first, labels, np.arange(n))
+    rank = np.empty(count, dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(count)
+    face_shell = rank[labels]
     V = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
-    depth = np.zeros(len(shells), dtype=int)
-    if len(shells) > 1:
-        probes = np.array([V[mesh.faces[s[0], 0]] for s in shells])
-        for j, shell in enumerate(shells):
-            wn = igl.winding_number(V, np.ascontiguousarray(mesh.faces[shell], dtype=np.int64), probes)
-            inside = np.abs(wn) > 0.5
-            inside[j] = False
-            depth += inside
-    faces = mesh.faces.copy()
-    flipped = 0
-    for shell, d in zip(shells, depth):
-        tri = V[faces[shell]]
-        signed_volume = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6.0
-        want_positive = d % 2 == 0
-        if (signed_volume > 0) != want_positive:
-            faces[shell] = faces[shell][:, ::-1]
-            flipped += 1
-    if flipped:
+    F = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+    tol = TOUCH * mesh.scale
+    lo, hi = np.full((count, 3), np.inf), np.full((count, 3), -np.inf)
+    np.minimum.at(lo, face_shell, V[F].min(axis=1))
+    np.maximum.at(hi, face_shell, V[F].max(axis=1))
+    boxes_meet = ((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol)).all(axis=2)
+    shell_vertices = [np.unique(F[face_shell == k]) for k in range(count)]
+    inside = np.zeros((count, count), dtype=bool)   # inside[a, b]: shell a lies inside shell b
+    touching = []
+    for i, j in zip(*np.nonzero(np.triu(boxes_meet, 1))):
+        for a, b in ((i, j), (j, i)):
+            points, faces = V[shell_vertices[a]], F[face_shell == b]
+            on = igl.point_mesh_squared_distance(points, V, faces)[0] <= tol ** 2   # shared vertices too
+            within = (np.abs(igl.winding_number(V, faces, points)) > 0.5) | on
+            inside[a, b] = within.all()
+            if on.any() or within.any() != within.all():
+                touching.append((i, j))
+    depth = inside.sum(axis=1)
+    outer = depth % 2 == 0
+    around = np.argmax(inside & (depth[None, :] == depth[:, None] - 1), axis=1)   # a cavity's shell around it
+    shell_body = (np.cumsum(outer) - 1)[np.where(outer, np.arange(count), around)]
+    if touching:
+        raise _touch_error(source, shell_body, *touching[0])
+    return face_shell, depth, shell_body
+
+
+def _touch_error(source: str, shell_body: np.ndarray, i: int, j: int) -> GeometryError:
+    """The error for shells ``i`` and ``j`` that touch or overlap, naming their bodies (1-based)."""
+    count = int(shell_body.max()) + 1
+    held = f"the surface holds {count} {'body' if count == 1 else 'bodies'}"
+    a, b = sorted((int(shell_body[i]) + 1, int(shell_body[j]) + 1))
+    if a == b:
+        return GeometryError(f"{held} and two shells of body {a} (its outer surface and a cavity, or two cavities) "
+                             "touch or overlap", where=source, fix="move the cavity clear of the other shell")
+    return GeometryError(f"{held} and bodies {a} and {b} touch or overlap", where=source,
+                         fix="move them apart, or unite them into one solid in the CAD tool")
+
+
+def _orient(mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray, depth: np.ndarray,
+            allow_multiple_solids: bool) -> list[str]:
+    """Orient every shell outward (cavities, at odd depth, inward); count solids. Mutates ``mesh``."""
+    notes = []
+    tri = np.asarray(mesh.vertices, dtype=np.float64)[mesh.faces]
+    signed_volume = np.bincount(face_shell, np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])))
+    flip = (signed_volume > 0) != (depth % 2 == 0)
+    if flip.any():
+        faces = mesh.faces.copy()
+        faces[flip[face_shell]] = faces[flip[face_shell]][:, ::-1]
         mesh.faces = faces
-        notes.append(f"turned {flipped} inside-out shell(s) the right way round")
+        notes.append(f"turned {int(flip.sum())} inside-out shell(s) the right way round")
     solids = int((depth % 2 == 0).sum())
     if solids > 1 and not allow_multiple_solids:
         raise GeometryError(f"the surface holds {solids} disconnected solids", where=source,

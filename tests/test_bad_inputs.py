@@ -313,10 +313,10 @@ def test_zero_volume_flat_tetrahedron(capsys, tmp_path):
     assert_refused(capsys, tmp_path, job, "no volume", where=str(tmp_path / "flat.off"))
 
 
-def test_self_intersecting_overlapping_cubes(capsys, tmp_path):
+def test_overlapping_cubes_are_refused_naming_the_bodies(capsys, tmp_path):
     write_with_trimesh(tmp_path / "overlap.stl", *two_cubes(offset=(5.0, 5.0, 5.0)))
     job = surface_job(tmp_path, "overlap.stl")
-    assert_refused(capsys, tmp_path, job, "intersects itself", "union",
+    assert_refused(capsys, tmp_path, job, "holds 2 bodies", "bodies 1 and 2 touch or overlap", "unite",
                    where=str(tmp_path / "overlap.stl"))
 
 
@@ -810,12 +810,12 @@ def _cli_command() -> list[str]:
     return [str(script)] if script.exists() else [sys.executable, "-m", "engine.cli"]
 
 
-@pytest.mark.parametrize("case", ["self-intersecting", "broken-yaml"])
+@pytest.mark.parametrize("case", ["overlapping", "broken-yaml"])
 def test_subprocess_one_line_no_traceback(tmp_path, case):
-    if case == "self-intersecting":
+    if case == "overlapping":
         write_with_trimesh(tmp_path / "overlap.stl", *two_cubes(offset=(5.0, 5.0, 5.0)))
         job = surface_job(tmp_path, "overlap.stl")
-        command, expected = _cli_command(), "intersects itself"
+        command, expected = _cli_command(), "touch or overlap"
     else:
         job = tmp_path / "job.yaml"
         job.write_text("geometry:\n  shape: [cylinder\n")
