@@ -4,10 +4,12 @@ Curves (segments) and patches (triangles) are measured exactly with libigl's
 AABB tree; a k-d tree over sample points would degenerate near the axis of a
 circle or cylinder, where thousands of samples are equally far. Points beyond
 a pattern's reach (outside the anchor's box grown by the bound) are skipped.
-Each anchor also keeps dense samples (spacing a fraction of the finest size
-its pattern asks for), which seed the gradation grid and measure gaps.
+Gaps between features are measured on samples of their edges, made only when
+a gap is asked for.
 """
 from __future__ import annotations
+
+from functools import cached_property
 
 import numpy as np
 import igl
@@ -38,15 +40,15 @@ class SampledDistance:
 
 
 class FeatureDistance:
-    """Exact distance to segments (a curve) or triangles (a patch), plus samples of the feature."""
+    """Exact distance to segments (a curve) or triangles (a patch)."""
 
-    def __init__(self, vertices: np.ndarray, simplices: np.ndarray, samples: np.ndarray):
+    def __init__(self, vertices: np.ndarray, simplices: np.ndarray, spacing: float):
         used = np.unique(simplices)
         remap = np.zeros(len(vertices), dtype=np.int64)
         remap[used] = np.arange(len(used))
         self.vertices = np.ascontiguousarray(vertices[used], dtype=np.float64)
         self.simplices = np.ascontiguousarray(remap[simplices], dtype=np.int64)
-        self.samples = np.asarray(samples, dtype=float).reshape(-1, 3)
+        self.spacing = spacing
         self.lo, self.hi = self.vertices.min(axis=0), self.vertices.max(axis=0)
         self.tree = igl.AABB()
         self.tree.init(self.vertices, self.simplices)
@@ -62,54 +64,47 @@ class FeatureDistance:
         distance[distance > bound] = np.inf
         return distance
 
+    @cached_property
+    def samples(self) -> np.ndarray:
+        """Points on every edge of the simplices, at most ``spacing`` apart (made when first asked)."""
+        return edge_samples(self.vertices, self.simplices, self.spacing)
+
     def gap_to(self, other) -> float:
-        return float(other(self.samples).min())
+        """Distance to ``other`` (a distance with samples), exceeding the true one by at most spacing / 2.
+
+        Two triangles (or a segment and a triangle) are closest at a point on
+        an edge of one of them, so both sides' edge samples are measured
+        exactly against the other side.
+        """
+        return float(min(other(self.samples).min(), self(other.samples).min()))
 
 
 def curve_distance(curve, spacing: float) -> FeatureDistance:
     line = curve.polyline
     segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))])
-    return FeatureDistance(line, segments, curve_samples(curve, spacing))
+    return FeatureDistance(line, segments, spacing)
 
 
 def patch_distance(geometry, patch, spacing: float) -> FeatureDistance:
-    return FeatureDistance(geometry.mesh.vertices, geometry.mesh.faces[patch.faces],
-                           patch_samples(geometry, patch, spacing))
+    return FeatureDistance(geometry.mesh.vertices, geometry.mesh.faces[patch.faces], spacing)
 
 
-def curve_samples(curve, spacing: float) -> np.ndarray:
-    count = int(min(2_000_000, max(2, np.ceil(curve.length / spacing) + 1)))
-    return curve.point_at(np.linspace(0.0, curve.length, count))
+MAX_EDGE_SAMPLES = 2_000_000
 
 
-def _barycentric_grid(n: int) -> np.ndarray:
-    """Barycentric coordinates of the (n+1)(n+2)/2 points of a triangle subdivided n times."""
-    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-    keep = i + j <= n
-    i, j = i[keep], j[keep]
-    return np.column_stack([n - i - j, i, j]).astype(float) / n
-
-
-def surface_samples(vertices: np.ndarray, faces: np.ndarray, spacing: float) -> np.ndarray:
-    """Points on the surface such that every surface point is within ``spacing`` of one."""
-    tri = vertices[faces]
-    edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-    subdiv = np.maximum(1, np.ceil(edge / spacing)).astype(int)
-    chunks = [vertices[np.unique(faces)]]
-    for n in np.unique(subdiv[subdiv > 1]):
-        bary = _barycentric_grid(int(n))
-        chunks.append(np.einsum("bk,fkd->fbd", bary, tri[subdiv == n]).reshape(-1, 3))
-    return np.concatenate(chunks)
-
-
-MAX_PATCH_SAMPLES = 2_000_000
-
-
-def patch_samples(geometry, patch, spacing: float) -> np.ndarray:
-    """Points on the patch, no farther than ``spacing`` from any of its points (at most ~2M)."""
-    vertices, faces = geometry.mesh.vertices, geometry.mesh.faces[patch.faces]
-    spacing = max(spacing, float(np.sqrt(2.0 * patch.area / MAX_PATCH_SAMPLES)))
-    return surface_samples(vertices, faces, spacing)
+def edge_samples(vertices: np.ndarray, simplices: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on every edge of the segments or triangles, at most ``spacing`` apart (at most ~2M)."""
+    corners = simplices.shape[1]
+    pairs = [simplices] if corners == 2 else [simplices[:, [i, (i + 1) % corners]] for i in range(corners)]
+    edges = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0)
+    start, vector = vertices[edges[:, 0]], vertices[edges[:, 1]] - vertices[edges[:, 0]]
+    length = np.linalg.norm(vector, axis=1)
+    spacing = max(spacing, float(length.sum()) / MAX_EDGE_SAMPLES)
+    steps = np.maximum(1, np.ceil(length / spacing)).astype(np.int64)
+    edge = np.repeat(np.arange(len(edges)), steps + 1)
+    first = np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
+    t = (np.arange(len(edge)) - first) / steps[edge]
+    return start[edge] + t[:, None] * vector[edge]
 
 
 class RegionDistance:

@@ -359,8 +359,7 @@ def _union(distances: list):
     first = distances[0]
     offsets = np.cumsum([0] + [len(d.vertices) for d in distances[:-1]])
     return type(first)(np.concatenate([d.vertices for d in distances]),
-                       np.concatenate([d.simplices + o for d, o in zip(distances, offsets)]),
-                       np.concatenate([d.samples for d in distances]))
+                       np.concatenate([d.simplices + o for d, o in zip(distances, offsets)]), first.spacing)
 
 
 def _no_feature(placement, features):
