@@ -1,16 +1,19 @@
 """What an FE analyst needs beyond the elements: named groups of the model's features, and
 quadratic tetrahedra whose boundary follows the surface.
 
-Groups: ``solid`` (every tetrahedron), one per surface patch (its name, or its id such as
-``patch-3``) with its boundary triangles, one per named or unnamed feature curve with its mesh
-edges, one per named corner. They become physical groups in ``.msh`` and node sets, element sets
-and element-face surfaces in Abaqus ``.inp``.
+Groups: ``solid`` (every tetrahedron), ``solid-1``, ``solid-2``, ... (the tetrahedra of each body,
+where the surface holds several), one per surface patch (its name, or its id such as ``patch-3``)
+with its boundary triangles, one per named or unnamed feature curve with its mesh edges, one per
+named corner. They become physical groups in ``.msh``, node sets, element sets and element-face
+surfaces in Abaqus ``.inp``, and element groups in ``.med``.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
 
 from .mesh import NODE_LEVELS, TetMesh
 from .meshing.surface import arc_parameter
@@ -34,9 +37,32 @@ class Group:
         return np.unique(self.cells) if self.dim < 3 else np.array([], np.int64)
 
 
-def feature_groups(mesh: TetMesh, features) -> list[Group]:
-    """The solid, its patches, curves and corners as groups (see the module doc); empty names never."""
+def tet_bodies(mesh: TetMesh, geometry) -> np.ndarray:
+    """The body (0-based, as ``geometry.face_body``) of every tet.
+
+    Tets joined through shared nodes form one piece; a piece belongs to the body whose surface is
+    closest to the centroid of its largest tet (a point inside a body is closer to that body's own
+    surface than to any other).
+    """
+    if geometry.bodies == 1:
+        return np.zeros(len(mesh.tets), np.int64)
+    n, first = len(mesh.points), np.repeat(mesh.tets[:, 0], 3)
+    graph = sparse.coo_matrix((np.ones(len(first)), (first, mesh.tets[:, 1:].ravel())), shape=(n, n))
+    piece = csgraph.connected_components(graph, directed=False)[1][mesh.tets[:, 0]]
+    order = np.lexsort((-mesh.volumes(), piece))
+    largest = order[np.r_[0, np.flatnonzero(np.diff(piece[order])) + 1]]   # per piece, ascending
+    face = geometry.closest_point(mesh.points[mesh.tets[largest]].mean(axis=1))[2]
+    return geometry.face_body[face][np.searchsorted(piece[largest], piece)]
+
+
+def feature_groups(mesh: TetMesh, features, body: np.ndarray | None = None) -> list[Group]:
+    """The solid, its bodies (``body``: 0-based per tet, from :func:`tet_bodies`), patches, curves and corners
+    as groups (see the module doc); patches, curves and corners only where the mesh has a tagged boundary."""
     groups = [Group("solid", 3, np.arange(len(mesh.tets)))]
+    if body is not None and body.max(initial=0) > 0:
+        groups += [Group(f"solid-{b + 1}", 3, np.flatnonzero(body == b)) for b in range(body.max() + 1)]
+    if len(mesh.boundary) == 0:
+        return groups
     for p, patch in enumerate(features.patches):
         faces = mesh.boundary[mesh.boundary_patch == p]
         if len(faces):

@@ -62,6 +62,20 @@ def to_meshio(model: FEModel, audit: bool = False) -> meshio.Mesh:
                        point_data=point_data, cell_data=cell_data)
 
 
+def to_med(model: FEModel) -> meshio.Mesh:
+    """The VTU's tetrahedra and fields, with the element groups (``solid``, ``solid-1``, ...) as MED families."""
+    data = to_meshio(model, audit=True)
+    solids = [g for g in model.groups if g.dim == 3]
+    if solids:
+        member = np.zeros((len(model.tets), len(solids)), dtype=bool)
+        for k, group in enumerate(solids):
+            member[group.cells, k] = True
+        combinations, family = np.unique(member, axis=0, return_inverse=True)
+        data.cell_data["cell_tags"] = [-1 - family.ravel()]   # element families are numbered from -1 down
+        data.cell_tags = {-1 - f: [g.name for g, m in zip(solids, row) if m] for f, row in enumerate(combinations)}
+    return data
+
+
 def to_gmsh(model: FEModel) -> meshio.Mesh:
     """Tets and every group's cells, tagged with its physical group (named in field_data)."""
     q = model.quadratic
@@ -184,7 +198,7 @@ def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -
                "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
                "inp": lambda tmp: write_abaqus(tmp, model),
                "bdf": lambda tmp: write_nastran(tmp, model),
-               "med": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="med")}
+               "med": lambda tmp: meshio.write(tmp, to_med(model), file_format="med")}
     targets = [(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats]
     if model.legend is not None:
         targets.append((Path(directory) / f"{name}.audit.json",

@@ -13,7 +13,7 @@ from .errors import JobError, LimitError
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
 from .audit import Audit, audit_mesh
-from .fe import Group, feature_groups, quadratic
+from .fe import feature_groups, quadratic, tet_bodies
 from .io import FEModel, write_mesh
 from .job import Job
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
@@ -104,10 +104,13 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
 
 
 def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None) -> FEModel:
-    """The mesh as the files hold it: the job's element order, the features' named groups, the audit."""
+    """The mesh as the files hold it: the job's element order, the bodies' and features' named groups, the
+    audit, and the cell field ``body`` (1-based)."""
     quadratic_elements = quadratic(mesh, geometry, features) if job.output_order == 2 else None
-    return FEModel.build(mesh, feature_groups(mesh, features) if len(mesh.boundary) else
-                         [Group("solid", 3, np.arange(len(mesh.tets)))], quadratic_elements, audit)
+    body = tet_bodies(mesh, geometry)
+    model = FEModel.build(mesh, feature_groups(mesh, features, body), quadratic_elements, audit)
+    model.cell_data["body"] = (body + 1).astype(np.int32)
+    return model
 
 
 def describe_mesher_stats(stats: dict) -> str:

@@ -58,3 +58,66 @@ def test_one_shell_crossing_itself_is_still_named_so():
     vertices[np.argmax(vertices.sum(axis=1))] = (0, 0, -8)
     with pytest.raises(GeometryError, match="intersects itself"):
         validate_surface(vertices, box.faces, "dent")
+
+
+def mesh_job(folder, surface: trimesh.Trimesh, **geometry) -> tuple[int, object]:
+    """Write ``surface`` as parts.stl and a job meshing it into folder/out (all formats); run the CLI."""
+    import yaml
+
+    from engine.cli import main
+
+    surface.export(folder / "parts.stl")
+    job = folder / "job.yaml"
+    job.write_text(yaml.safe_dump({"geometry": {"file": "parts.stl", **geometry}, "size": 2.5,
+                                   "output": {"formats": ["vtu", "msh", "inp", "med"]}}))
+    return main(["mesh", str(job), "--quiet"]), folder / "out"
+
+
+def test_two_boxes_mesh_as_two_bodies(tmp_path):
+    import gmsh
+    import meshio
+
+    code, out = mesh_job(tmp_path, boxes((CUBE, (0, 0, 0)), (CUBE, (20, 0, 0))), allow_multiple_solids=True)
+    assert code == 0
+    vtu = meshio.read(out / "mesh.vtu")
+    tets = vtu.cells_dict["tetra"]
+    body = vtu.cell_data["body"][0]
+    centroids = vtu.points[tets].mean(axis=1)
+    assert set(body.tolist()) == {1, 2} and ((centroids[:, 0] > 10) == (body == 2)).all()
+    gmsh.initialize(readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        gmsh.open(str(out / "mesh.msh"))
+        groups = {gmsh.model.getPhysicalName(dim, tag): (dim, tag) for dim, tag in gmsh.model.getPhysicalGroups()}
+        assert {"solid", "solid-1", "solid-2"} <= set(groups) and groups["solid-2"][0] == 3
+        nodes = gmsh.model.mesh.getNodesForPhysicalGroup(*groups["solid-2"])[1].reshape(-1, 3)
+        assert (nodes[:, 0] > 14.99).all() and len(nodes) > 8
+    finally:
+        gmsh.finalize()
+    inp = meshio.read(out / "mesh.inp")
+    for name, number in (("solid_1", 1), ("solid_2", 2)):
+        cells = np.concatenate([np.asarray(c, dtype=int) for c in inp.cell_sets[name]])
+        assert sorted(cells.tolist()) == np.flatnonzero(body == number).tolist()
+    med = meshio.read(out / "mesh.med")
+    names = {tag: set(groups) for tag, groups in med.cell_tags.items()}
+    families = med.cell_data["cell_tags"][0]
+    assert [names[f] for f in families[[0, -1]]] == [{"solid", f"solid-{body[0]}"}, {"solid", f"solid-{body[-1]}"}]
+
+
+def test_a_box_with_a_cavity_is_one_body(tmp_path):
+    import meshio
+
+    code, out = mesh_job(tmp_path, boxes((CUBE, (0, 0, 0)), ((4, 4, 4), (0, 0, 0))))
+    assert code == 0
+    vtu = meshio.read(out / "mesh.vtu")
+    assert set(vtu.cell_data["body"][0].tolist()) == {1}
+    assert "solid-1" not in meshio.read(out / "mesh.msh").field_data
+
+
+def test_overlapping_boxes_exit_2_with_one_line_and_no_files(tmp_path, capsys):
+    code, out = mesh_job(tmp_path, boxes((CUBE, (0, 0, 0)), (CUBE, (6, 0, 0)), (CUBE, (40, 0, 0))),
+                         allow_multiple_solids=True)
+    err = capsys.readouterr().err
+    assert code == 2 and not out.exists()
+    (line,) = err.strip().splitlines()
+    assert "the surface holds 3 bodies and bodies 1 and 2 touch or overlap; " in line
