@@ -29,6 +29,13 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _angle(text: str) -> float:
+    value = _positive_float(text)
+    if not value < 180:
+        raise argparse.ArgumentTypeError(f"must be an angle in degrees between 0 and 180, got {text}")
+    return value
+
+
 def _seed(text: str) -> int:
     try:
         value = int(text)
@@ -116,6 +123,22 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--out", type=Path, default=Path("validation-out"), help="--study: output folder")
     validate.set_defaults(run=_cmd_validate)
 
+    features = commands.add_parser("features", help="list the corners, curves and patches of a solid, with their "
+                                   "kinds, sizes and places (no meshing)",
+                                   description="FILE_OR_JOB is a surface file (STL, OBJ, PLY, OFF, GLB) or a job file "
+                                               "(its solid: built-in shape or file, named features, feature angle, "
+                                               "knowledge). Lists every corner, curve and patch: id, names, feature "
+                                               "kinds (hole, fillet, junction, re-entrant-edge, ...), size (curve: "
+                                               "length L and circle radius r; patch: area A and cylinder radius r), "
+                                               "centroid and bounding box")
+    features.add_argument("target", metavar="FILE_OR_JOB", help="surface file or job YAML file")
+    features.add_argument("--feature-angle", type=_angle, metavar="DEGREES",
+                          help="dihedral angle above which an edge is a feature edge (default: the job's, or 30)")
+    features.add_argument("--knowledge", type=Path, action="append", default=[],
+                          help="extra knowledge files or folders (feature kinds)")
+    features.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    features.set_defaults(run=_cmd_features)
+
     for noun in ("patterns", "recipes"):
         sub = commands.add_parser(noun, help=f"list or show the {noun} of the knowledge base")
         verbs = sub.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
@@ -193,6 +216,24 @@ def _explain_saved(target: Path, args) -> int:
         print(explain_element(cells, legend, element))
     except IndexError as error:
         raise JobError(str(error), where=str(vtu), fix="give an element number from 0 to the element count - 1") from None
+    return 0
+
+
+def _cmd_features(args) -> int:
+    import json
+
+    from .describe import feature_records, feature_table, solid_features
+
+    source, geometry, features = solid_features(args.target, args.feature_angle, args.knowledge)
+    records = feature_records(features)
+    if args.json:
+        print(json.dumps({"source": source, "feature_angle": features.feature_angle, "bodies": geometry.bodies,
+                          **records}, indent=1))
+        return 0
+    print(f"{source}: {len(features.corners)} corners, {len(features.curves)} curves, {len(features.patches)} "
+          f"patches (feature angle {features.feature_angle:g} deg"
+          + (f", {geometry.bodies} bodies)" if geometry.bodies > 1 else ")"))
+    print(feature_table(records, geometry.scale))
     return 0
 
 
