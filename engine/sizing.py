@@ -88,12 +88,16 @@ class PlacedPattern:
     distance: object
     roles: dict = field(default_factory=dict)   # role -> distance to the role feature(s)
 
+    @property
+    def reach(self) -> float:
+        """Anchor distance beyond which every zone's membership is zero (a ligament is >= d_anchor - gap)."""
+        return max((z.reach + z.gap for z in self.zones), default=0.0)
+
     def evaluate(self, points: np.ndarray):
         """(mu, h, zone index) at ``points``; mu = 0, h = inf and zone = -1 where no zone reaches."""
         n = len(points)
         best_mu, best_h, best_zone = np.zeros(n), np.full(n, np.inf), np.full(n, -1)
-        anchor_reach = max((z.reach + z.gap for z in self.zones), default=0.0)
-        d_anchor = self.distance(points, anchor_reach)
+        d_anchor = self.distance(points, self.reach)
         for k, zone in enumerate(self.zones):
             # only points the zone can reach; the ligament d_anchor + d_role - gap is >= d_anchor - gap
             idx = np.flatnonzero(d_anchor < zone.reach + zone.gap) if np.isfinite(zone.reach) else np.arange(n)
@@ -116,8 +120,7 @@ class PlacedPattern:
         """
         n = len(centres)
         mu_low, mu_high, h_low = np.zeros(n), np.zeros(n), np.full(n, np.inf)
-        anchor_reach = max((z.reach + z.gap for z in self.zones), default=0.0) + 2 * radius
-        d_anchor = self.distance(centres, anchor_reach)
+        d_anchor = self.distance(centres, self.reach + 2 * radius)
         for zone in self.zones:
             if zone.role is None:
                 d, spread = d_anchor, radius
@@ -202,7 +205,9 @@ class SizingField:
 
         Each cell gets a lower bound of the raw size over the whole cell (interval
         bounds of every pattern's mu and h over the cell, keeping only patterns
-        that can win somewhere in it); each node the minimum over its 8 cells;
+        that can win somewhere in it; a pattern is bounded only on the cells
+        its anchor's box grown by its reach holds, elsewhere its mu is 0); each
+        node the minimum over its 8 cells;
         then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
         Trilinear interpolation of such a grid is Euclidean-Lipschitz with g - 1
         and never exceeds the raw size.
@@ -213,20 +218,22 @@ class SizingField:
         cell = max(cell, float(extent.max()) / 512)
         shape = tuple(int(np.ceil(e / cell)) + 3 for e in extent)
         origin = lo - cell
-        axes = [origin[k] + cell * (np.arange(shape[k] - 1) + 0.5) for k in range(3)]
-        centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+        cells_shape = tuple(n - 1 for n in shape)
         half_diagonal = 0.5 * math.sqrt(3.0) * cell
-        lows, mu_low, mu_high = [], [], []
+        bounded = []   # (cells, mu low, mu high, h low) per placed pattern
         for placed in self.placed:
-            m_lo, m_hi, h_lo = placed.bounds(centres, half_diagonal)
-            lows.append(h_lo)
-            mu_low.append(m_lo)
-            mu_high.append(m_hi)
-        mu_low, mu_high, lows = np.array(mu_low), np.array(mu_high), np.array(lows)
-        can_win = (mu_high > 0) & (mu_high >= mu_low.max(axis=0))
-        cell_low = np.where(can_win, lows, np.inf).min(axis=0)
-        cell_low = np.where(mu_low.max(axis=0) > 0, cell_low, np.minimum(cell_low, self.global_size))
-        cells = cell_low.reshape(tuple(n - 1 for n in shape))
+            index = _cells_near(placed.distance, placed.reach + 2 * half_diagonal, origin, cell, cells_shape)
+            centres = origin + cell * (np.column_stack(np.unravel_index(index, cells_shape)) + 0.5)
+            bounded.append((index, *placed.bounds(centres, half_diagonal)))
+        best_low = np.zeros(math.prod(cells_shape))
+        for index, m_lo, _, _ in bounded:
+            best_low[index] = np.maximum(best_low[index], m_lo)
+        cell_low = np.full(len(best_low), np.inf)
+        for index, _, m_hi, h_lo in bounded:
+            can_win = (m_hi > 0) & (m_hi >= best_low[index])
+            cell_low[index[can_win]] = np.minimum(cell_low[index[can_win]], h_lo[can_win])
+        cell_low = np.where(best_low > 0, cell_low, np.minimum(cell_low, self.global_size))
+        cells = cell_low.reshape(cells_shape)
         padded = np.pad(cells, 1, mode="edge")
         nodes = np.full(shape, np.inf)
         for corner in np.ndindex(2, 2, 2):
@@ -271,6 +278,16 @@ class SizingField:
     def expected_counts(self) -> tuple[float, float]:
         """(nodes, tetrahedra) a packing of this field should have (:func:`estimate_counts`), computed once."""
         return estimate_counts(self.geometry, self, self.features)
+
+
+def _cells_near(distance, bound: float, origin: np.ndarray, cell: float, shape: tuple) -> np.ndarray:
+    """Flat indices (ascending) of the grid cells whose centres lie in the anchor's box grown by ``bound``;
+    every cell for an unbounded reach or an anchor without a box (the domain)."""
+    if not math.isfinite(bound) or not hasattr(distance, "lo"):
+        return np.arange(math.prod(shape))
+    first = np.maximum(np.ceil((distance.lo - bound - origin) / cell - 0.5), 0).astype(np.int64)
+    last = np.minimum(np.floor((distance.hi + bound - origin) / cell - 0.5), np.array(shape) - 1).astype(np.int64)
+    return np.ravel_multi_index(np.ix_(*[np.arange(a, b + 1) for a, b in zip(first, last)]), shape).ravel()
 
 
 def _membership_at(zone: BoundZone, d: np.ndarray) -> np.ndarray:
