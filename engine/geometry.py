@@ -214,9 +214,9 @@ def _shells(mesh: trimesh.Trimesh, source: str):
     depth of every shell inside the others; body of every shell, 0-based in shell order).
 
     A shell at even depth bounds a body of its own, one at odd depth is a cavity of the body around it.
-    Shells whose bounding boxes overlap are tested against each other, vertex by vertex: a vertex on
-    the other shell (a shared one too) or some but not all vertices inside it make them touch or
-    overlap, which is refused.
+    Shells whose bounding boxes overlap are tested against each other, vertex by vertex (by the inside
+    grid; exactly only near the other shell): a vertex on the other shell (a shared one too) or some but
+    not all vertices inside it make them touch or overlap, which is refused.
     """
     n = len(mesh.faces)
     labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=n)
@@ -233,14 +233,13 @@ def _shells(mesh: trimesh.Trimesh, source: str):
     np.minimum.at(lo, face_shell, V[F].min(axis=1))
     np.maximum.at(hi, face_shell, V[F].max(axis=1))
     boxes_meet = ((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol)).all(axis=2)
-    shell_vertices = [np.unique(F[face_shell == k]) for k in range(count)]
+    pairs = np.argwhere(np.triu(boxes_meet, 1))
+    shells = {k: _Shell(V, F[face_shell == k]) for k in np.unique(pairs)}
     inside = np.zeros((count, count), dtype=bool)   # inside[a, b]: shell a lies inside shell b
     touching = []
-    for i, j in zip(*np.nonzero(np.triu(boxes_meet, 1))):
+    for i, j in pairs:
         for a, b in ((i, j), (j, i)):
-            points, faces = V[shell_vertices[a]], F[face_shell == b]
-            on = igl.point_mesh_squared_distance(points, V, faces)[0] <= tol ** 2   # shared vertices too
-            within = (np.abs(igl.winding_number(V, faces, points)) > 0.5) | on
+            within, on = shells[b].classify(shells[a].points, tol)
             inside[a, b] = within.all()
             if on.any() or within.any() != within.all():
                 touching.append((i, j))
@@ -251,6 +250,45 @@ def _shells(mesh: trimesh.Trimesh, source: str):
     if touching:
         raise _touch_error(source, shell_body, *touching[0])
     return face_shell, depth, shell_body
+
+
+class _Shell:
+    """One closed shell, either way round: its vertices, and an inside test that also finds points on it."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        used = np.unique(faces)
+        self.points = vertices[used]
+        self.faces = np.searchsorted(used, faces)
+        tri = self.points[self.faces]
+        self.sign = -1.0 if np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) > 0 else 1.0
+        # the grid's few free regions by winding number: a region's cell centre may lie far from every face,
+        # where the closest-point search would visit them all (the centre of a sphere)
+        self.grid = InsideGrid(self.points, self.faces, lambda centres: np.abs(
+            [winding_number(self.points[self.faces], centre) for centre in centres]) > 0.5)
+
+    def classify(self, points: np.ndarray, tol: float):
+        """(inside or on, on: within ``tol``) for every point; exact (signed distance) in the grid's cells
+        that the shell may touch, by the cell's free region elsewhere."""
+        region = self.grid.region(points)
+        within = self.grid.region_inside[np.maximum(region, 0)]
+        on = np.zeros(len(points), dtype=bool)
+        near = np.flatnonzero(region == 0)
+        if len(near):
+            distance = self.sign * igl.signed_distance(np.ascontiguousarray(points[near]), self.points, self.faces,
+                                                       sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
+            within[near] = distance > -tol
+            on[near] = np.abs(distance) <= tol
+        return within, on
+
+
+def winding_number(triangles: np.ndarray, point: np.ndarray) -> float:
+    """How often the triangles (t, 3, 3) wind around ``point``: the sum of their solid angles over 4 pi."""
+    a, b, c = (triangles[:, k] - point for k in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    dot = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
+           + np.einsum("ij,ij->i", c, a) * lb)
+    return float(np.arctan2(det, dot).sum() / (2 * np.pi))
 
 
 def _touch_error(source: str, shell_body: np.ndarray, i: int, j: int) -> GeometryError:

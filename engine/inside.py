@@ -46,18 +46,22 @@ class InsideGrid:
         self.labels = labels
         self.region_inside = region_inside
 
+    def region(self, points: np.ndarray) -> np.ndarray:
+        """The free region of each point's cell: 0 in a cell the surface may touch, -1 outside the grid."""
+        raw = np.floor((np.asarray(points, dtype=float).reshape(-1, 3) - self.origin) / self.cell)
+        in_box = np.all((raw >= 0) & (raw < np.array(self.shape)), axis=1)
+        region = np.full(len(raw), -1, dtype=np.int64)
+        idx = raw[in_box].astype(np.int64)
+        region[in_box] = self.labels[idx[:, 0], idx[:, 1], idx[:, 2]]
+        return region
+
     def contains(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 3)
-        raw = np.floor((points - self.origin) / self.cell)
-        in_box = np.all((raw >= 0) & (raw < np.array(self.shape)), axis=1)
-        result = np.zeros(len(points), dtype=bool)
-        idx = raw[in_box].astype(np.int64)
-        label = self.labels[idx[:, 0], idx[:, 1], idx[:, 2]]
-        inside = self.region_inside[label]
-        undecided = label == 0
+        region = self.region(points)
+        result = self.region_inside[np.maximum(region, 0)]   # region 0 is not inside: decided below
+        undecided = region == 0
         if undecided.any():
-            inside[undecided] = self.exact(points[in_box][undecided])
-        result[in_box] = inside
+            result[undecided] = self.exact(points[undecided])
         return result
 
 
