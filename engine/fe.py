@@ -134,7 +134,7 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6).
 
     Mid-edge nodes of boundary edges are moved onto the input surface (onto
-    their feature curve for curve edges); where an element's Jacobian would
+    their feature curve for sharp curves' edges); where an element's Jacobian would
     turn non-positive its mid-edge nodes move only part of the way (straight
     at last, :func:`limit_curving`), so every Jacobian is positive.
     """
@@ -147,7 +147,9 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
     chords, curve = curve_edges(mesh, features)
     chord_row = row_index(unique, np.sort(chords, axis=1))
-    for c in np.unique(curve):
+    for c in np.unique(curve):    # a smooth cut's chords are curved onto the surface, like a patch's
+        if not features.curves[c].sharp:
+            continue
         rows = chord_row[(curve == c) & (chord_row >= 0)]
         curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
     points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import igl
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
@@ -128,6 +129,12 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     marks faces that form patches of their own even where they meet their
     neighbours smoothly (e.g. a tangent fillet). Their borders become curves,
     as does the cut that halves a smooth closed patch (a sphere's surface).
+    Sharp edges that separate no two patches (a coarse faceting's creases
+    inside one smooth surface) are not features. A smooth patch that is
+    neither a plane nor a cylinder is cut into charts (see :func:`chart_pieces`):
+    its planar faces, its cylinders (a fillet, a hole wall) and pieces of
+    bounded normal spread, each of which can be flattened; the cuts are
+    smooth (``sharp=False``) curves.
     """
     mesh = geometry.mesh
     threshold = np.radians(feature_angle)
@@ -139,16 +146,159 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     truly_sharp = sharp.copy()
     sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
     patches, face_patch = _patches(geometry, adjacency[~sharp])
+    inside = face_patch[adjacency[:, 0]] == face_patch[adjacency[:, 1]]
+    sharp &= ~inside
+    truly_sharp &= ~inside
     closed = np.setdiff1d(np.arange(len(patches)), face_patch[adjacency[sharp]])
     if len(closed):   # a smooth closed patch (a sphere) is cut in two, so that every patch has a border
         for k, p in enumerate(closed, start=group.max() + 1):
             group[_half(mesh, patches[p].faces)] = k
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
+    pieces = [piece for patch in patches if not patch.planar and patch.cylinder is None
+              for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp)]
+    if pieces:
+        for k, piece in enumerate(pieces, start=group.max() + 1):
+            group[piece] = k
+        sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
+        patches, face_patch = _patches(geometry, adjacency[~sharp])
     sharp_edges = mesh.face_adjacency_edges[sharp]
     corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
                               truly_sharp[sharp], threshold)
     return Features(corners, curves, patches, face_patch, feature_angle)
+
+
+CHART_CONE = 90.0    # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
+MAX_STRETCH = 1.6    # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
+COPLANAR = 1e-3      # radians: faces meeting at a smaller angle lie in one plane
+MAX_SPLITS = 16      # halvings of a piece's normal spread before it is taken as it is
+
+
+def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray) -> list[np.ndarray]:
+    """The charts a smooth patch (``faces``) is cut into; one piece when it can be flattened whole.
+
+    First its planar regions (faces all of whose neighbours in the patch are
+    coplanar, grown across coplanar edges); then each connected rest is one
+    piece if it lies on a cylinder or can be flattened (:func:`flattenable`),
+    else it is halved across its widest spread of normals until every piece can.
+    ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges.
+    """
+    adjacency = mesh.face_adjacency
+    pairs = adjacency[smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]])]
+    bent = mesh.face_adjacency_angles[smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]])] >= COPLANAR
+    n = len(mesh.faces)
+    in_patch = np.zeros(n, bool)
+    in_patch[faces] = True
+    core = in_patch.copy()
+    core[pairs[bent].ravel()] = False
+    region = _components(n, pairs[~bent])
+    planar_regions = np.unique(region[core])
+    planar = np.isin(region, planar_regions) & in_patch
+    if not planar.any() and flattenable(mesh, faces):
+        return [faces]
+    pieces = [np.flatnonzero(region == r) for r in planar_regions]
+    rest = in_patch & ~planar
+    keep = rest[pairs[:, 0]] & rest[pairs[:, 1]]
+    labels = _components(n, pairs[keep])
+    for r in np.unique(labels[rest]):
+        pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep])
+    return pieces
+
+
+def _components(n: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected-component label of each of ``n`` nodes joined by ``pairs``."""
+    graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return csgraph.connected_components(graph, directed=False)[1]
+
+
+def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
+    """``faces`` (connected) as pieces that lie on a cylinder or can be flattened.
+
+    A piece that is neither is halved: the faces whose normals lie farthest
+    apart along the direction in which they spread most seed two regions, and
+    every face joins the seed it reaches with the least turning of the normal
+    along the surface (a graph Voronoi diagram, Dijkstra over face adjacency,
+    weighted by the angle between neighbouring faces): both halves are
+    connected and their border runs where the normal turns midway.
+    """
+    n = len(mesh.faces)
+    normals, centres = mesh.face_normals, mesh.triangles_center
+    weight = mesh.face_adjacency_angles + 1e-3 * np.linalg.norm(
+        centres[mesh.face_adjacency[:, 0]] - centres[mesh.face_adjacency[:, 1]], axis=1) / max(mesh.scale, 1e-300)
+    key = np.minimum(mesh.face_adjacency[:, 0], mesh.face_adjacency[:, 1]) * n + \
+        np.maximum(mesh.face_adjacency[:, 0], mesh.face_adjacency[:, 1])
+    order = np.argsort(key)
+    pair_key = pairs.min(axis=1) * n + pairs.max(axis=1)
+    pair_weight = weight[order[np.searchsorted(key[order], pair_key)]]
+    todo, pieces = [(faces, 0)], []
+    while todo:
+        piece, depth = todo.pop()
+        verts = mesh.vertices[np.unique(mesh.faces[piece])]
+        if depth >= MAX_SPLITS or len(piece) < 2 or flattenable(mesh, piece) or \
+                fit_cylinder(centres[piece], normals[piece], verts) is not None:
+            pieces.append(piece)
+            continue
+        spread = normals[piece] - normals[piece].mean(axis=0)
+        along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
+        local = np.full(n, -1)
+        local[piece] = np.arange(len(piece))
+        inner = (local[pairs[:, 0]] >= 0) & (local[pairs[:, 1]] >= 0)
+        a, b = local[pairs[inner, 0]], local[pairs[inner, 1]]
+        graph = sparse.coo_matrix((pair_weight[inner], (a, b)), shape=(len(piece),) * 2).tocsr()
+        seeds = [int(np.argmin(along)), int(np.argmax(along))]
+        _, _, source = csgraph.dijkstra(graph, directed=False, indices=seeds, min_only=True, return_predecessors=True)
+        for seed in seeds:
+            todo.append((piece[source == seed], depth + 1))
+    return sorted(pieces, key=lambda piece: int(piece.min()))
+
+
+def flattenable(mesh, faces: np.ndarray) -> bool:
+    """Whether a connected piece of surface maps to the plane without folding or much stretching: its
+    normals stay within CHART_CONE of their mean and its conformal map (:func:`conformal_map`) exists."""
+    normals, areas = mesh.face_normals[faces], mesh.area_faces[faces]
+    mean = (normals * areas[:, None]).sum(axis=0)
+    if np.linalg.norm(mean) < 1e-12:
+        return False
+    cone = np.degrees(np.arccos(np.clip((normals @ (mean / np.linalg.norm(mean))).min(), -1.0, 1.0)))
+    if cone > CHART_CONE:
+        return False
+    used, local = np.unique(mesh.faces[faces], return_inverse=True)
+    return conformal_map(mesh.vertices[used], local.reshape(-1, 3)) is not None
+
+
+def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
+    """(V, 2) least-squares conformal map (libigl LSCM) of a connected triangle set with a border,
+    counter-clockwise where the triangles are, scaled so that its median length scale is 1; None when it
+    folds or stretches lengths by more than MAX_STRETCH between its triangles."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    loops = igl.boundary_loop_all(triangles) if len(triangles) else []
+    if not loops:
+        return None
+    loop = np.asarray(max(loops, key=len))
+    far = int(np.argmax(np.linalg.norm(vertices[loop] - vertices[loop[0]], axis=1)))
+    pinned = np.array([loop[0], loop[far]])
+    uv, _ = igl.lscm(vertices, triangles, pinned, np.array([[0.0, 0.0], [1.0, 0.0]]))
+    a, b, c = (uv[triangles[:, i]] for i in range(3))
+    flat = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    if np.sum(flat < 0) * 2 > len(flat):
+        uv[:, 0] *= -1
+        flat = -flat
+    tri = vertices[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    solid = area > 1e-12 * area.max()
+    if not np.all(flat[solid] > 0):
+        return None
+    scale = np.sqrt(flat[solid] / area[solid])
+    if scale.max() > MAX_STRETCH * scale.min():
+        return None
+    return uv / np.median(scale)
+
+
+def euler_characteristic(triangles: np.ndarray) -> int:
+    """V - E + F of a triangle set (1 for a disk, 0 for an annulus or a tube, 2 for a sphere)."""
+    edges = np.unique(np.sort(triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
+    return len(np.unique(triangles)) - len(edges) + len(triangles)
 
 
 def _half(mesh, faces: np.ndarray) -> np.ndarray:
@@ -197,7 +347,11 @@ def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, truly_s
     nv = len(vertices)
     degree = np.bincount(edges.ravel(), minlength=nv)
     corner_mask = (degree > 0) & (degree != 2)
-    corner_mask |= _sharp_turns(vertices, edges, degree, turn_threshold)
+    sharp_degree = np.bincount(edges[truly_sharp].ravel(), minlength=nv)
+    corner_mask |= (degree == 2) & (sharp_degree == 1)    # where a sharp edge goes on as a smooth cut
+    # a sharp chain turning by more than the feature angle has a corner there; a smooth cut follows
+    # the input's edges, whose zigzag is no corner
+    corner_mask |= _sharp_turns(vertices, edges[truly_sharp], sharp_degree, turn_threshold) & (degree == 2)
     # edges belong to one curve when they share a vertex that is not a corner
     ne = len(edges)
     ends = np.concatenate([edges[:, 0], edges[:, 1]])

@@ -64,7 +64,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         unslid = points
         points, more = relocate(points, tets, slide[1], seed)
         moves += more
-        slid = np.flatnonzero((level == PATCH) & np.any(points != unslid, axis=1))
+        slid = np.flatnonzero(np.any(points != unslid, axis=1) & ~np.isnan(slide[1][:, 0]) & (slide[1] != 0).any(axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
     tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR)
     seconds["improve"] = time.perf_counter() - start
@@ -86,15 +86,19 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
 
 
 def _slide_directions(points, level, entity, geometry, features):
-    """Per node: NaN (fixed), 0 (free: volume and Steiner nodes) or the normal of the plane a patch node
-    slides in; (planar patches only, every patch: curved ones in the plane of the input face the node is on)."""
+    """Per node: NaN (fixed), 0 (free: volume and Steiner nodes) or the normal of the plane a surface node
+    slides in; (planar patches only, every patch and smooth cut: curved ones and the nodes of a cut through a
+    smooth surface in the plane of the input face the node is on)."""
     slide = np.full((len(level), 3), np.nan)
     slide[(level == VOLUME) | (level == STEINER)] = 0.0
     on_patch = np.flatnonzero(level == PATCH)
     planar = np.array([p.planar for p in features.patches], dtype=bool)[entity[on_patch]]
-    _, _, face = geometry.closest_point(points[on_patch])
+    smooth = np.array([not c.sharp for c in features.curves] + [False], dtype=bool)
+    on_cut = np.flatnonzero((level == CURVE) & smooth[np.where(level == CURVE, entity, -1)])
+    sliding = np.concatenate([on_patch, on_cut])
+    _, _, face = geometry.closest_point(points[sliding])
     every = slide.copy()
-    every[on_patch] = geometry.mesh.face_normals[face]
+    every[sliding] = geometry.mesh.face_normals[face]
     slide[on_patch[planar]] = every[on_patch[planar]]
     return slide, every
 

@@ -21,6 +21,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
+from ..features import conformal_map
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delaunay is local)
@@ -28,9 +29,10 @@ CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is l
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
 HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
-REFINE_ROUNDS = 3  # both get a node at their circumcentre, in up to this many rounds
+REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5     # no node is added nearer than this x h to another
 NO_BUBBLE = -1    # the bubble id of a node the mesher adds
+ON_EDGE = 1e-9    # barycentric roundoff within which a point on a chart's border lies on its triangle
 
 
 @dataclass
@@ -116,6 +118,12 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
     """
     sides = curve_sides(geometry, features)
     nodes = packing
+    for _ in range(SPLIT_ROUNDS):   # chords that stray from their curve are split first
+        chains = curve_chains(nodes, features)
+        coarse = _coarse_chain_edges(nodes, features, chains)
+        if len(coarse) == 0:
+            break
+        nodes = _split_chain_edges(nodes, features, chains, coarse)
     for _ in range(SPLIT_ROUNDS):
         chains = curve_chains(nodes, features)
         triangles, patch_of, dropped, missed, added = [], [], [], [], []
@@ -165,6 +173,34 @@ def _border_edges(p, chains, sides, features) -> np.ndarray:
         if p == right:
             edges.append(pairs[:, ::-1])
     return np.concatenate(edges) if edges else np.zeros((0, 2), np.int64)
+
+
+def _coarse_chain_edges(nodes, features, chains) -> np.ndarray:
+    """(k, 2) chain edges whose chord strays more than DEVIATION x h from their curve."""
+    coarse = []
+    for index, chain in chains.items():
+        curve = features.curves[index]
+        if len(chain) < 2:
+            continue
+        ends = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        s = arc_parameter(curve, nodes.points[chain])
+        knots = curve.arc_length[1:-1]          # the curve's own vertices between its ends
+        if curve.closed:    # the closing edge runs past the end, to the first node one turn on
+            knots = np.concatenate([curve.arc_length[:-1], curve.arc_length[:-1] + curve.length])
+            s = np.concatenate([s, [s[0] + curve.length]])
+        edge = np.searchsorted(s, knots, side="right") - 1
+        inside = (edge >= 0) & (edge < len(ends))
+        edge, knots = edge[inside], knots[inside]
+        if len(edge) == 0:
+            continue
+        a, b = nodes.points[ends[edge, 0]], nodes.points[ends[edge, 1]]
+        x = curve.point_at(knots)
+        t = np.clip(np.einsum("ij,ij->i", x - a, b - a) / np.maximum(np.einsum("ij,ij->i", b - a, b - a), 1e-300), 0, 1)
+        stray = np.zeros(len(ends))
+        np.maximum.at(stray, edge, np.linalg.norm(a + t[:, None] * (b - a) - x, axis=1))
+        h = nodes.radius[ends].sum(axis=1)
+        coarse.append(ends[stray > DEVIATION * h])
+    return np.sort(np.concatenate(coarse), axis=1) if coarse else np.zeros((0, 2), np.int64)
 
 
 def _split_chain_edges(nodes, features, chains, pairs):
@@ -239,7 +275,8 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     """Points (uv, radius) to add where the triangulation is too coarse for the surface or the size:
     triangles whose chord strays more than DEVIATION x h from the curved patch, or acute ones whose
     circumradius exceeds HOLE x h (a bubble missing). The point is the circumcentre where it lies in its triangle,
-    else the centroid; one per hole, none near a node or the border."""
+    else the middle of its longest edge (the centroid when that edge is on the border); one per hole, none near
+    a node or the border."""
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
     if chart.turn is not None:   # a triangle across the seam: its corners within half a turn of the first
         b, c = (x - np.column_stack([chart.turn * np.round((x[:, 0] - a[:, 0]) / chart.turn), 0 * x[:, 1]])
@@ -252,7 +289,12 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
                                   ba[:, 0] * (ca ** 2).sum(1) - ca[:, 0] * (ba ** 2).sum(1)]) / (2 * double_area[:, None])
     wb, wc = _cross2(centre - a, c - a) / double_area, _cross2(b - a, centre - a) / double_area
     in_triangle = (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
-    point = np.where(in_triangle[:, None], centre, (a + b + c) / 3)
+    # else the middle of the longest edge, unless it is a border edge: away from the border and the nodes
+    longest = np.argmax(np.column_stack([la, lb, lc]), axis=1)
+    ends = np.take_along_axis(tri, np.array([[1, 2], [2, 0], [0, 1]])[longest], axis=1)
+    middle = np.choose(longest[:, None], [(b + c) / 2, (c + a) / 2, (a + b) / 2])
+    on_border = np.isin(np.sort(ends, axis=1) @ [len(uv), 1], np.sort(constraints, axis=1) @ [len(uv), 1])
+    point = np.where(in_triangle[:, None], centre, np.where(on_border[:, None], (a + b + c) / 3, middle))
     # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
     badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
     if chart.kind != "plane":
@@ -380,8 +422,10 @@ class PatchChart:
             a, b, c = (self.vertex_uv[face[:, i]] for i in range(3))
             area = _cross2(b - a, c - a)
             wb, wc = _cross2(uv - a, c - a) / area, _cross2(b - a, uv - a) / area
-            hit = np.isnan(out[:, 0]) & (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
-            weights = np.column_stack([1 - wb - wc, wb, wc])[hit]
+            weights = np.column_stack([1 - wb - wc, wb, wc])
+            hit = np.isnan(out[:, 0]) & (weights.min(axis=1) >= -ON_EDGE)   # a border node's roundoff counts in
+            weights = np.clip(weights[hit], 0.0, None)
+            weights /= weights.sum(axis=1, keepdims=True)
             out[hit] = np.einsum("ij,ijk->ik", weights, self.vertices[face[hit]])
         return out
 
@@ -395,27 +439,16 @@ class PatchChart:
                 (np.flatnonzero(uv[:, 0] >= half - span), np.array([-self.turn, 0.0]))]
 
     def _conformal_map(self, patch, source) -> np.ndarray:
-        loops = igl.boundary_loop_all(self.faces) if len(self.faces) else []
-        edges = np.unique(np.sort(self.faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
-        euler = len(self.vertices) - len(edges) + len(self.faces)
-        if len(loops) != 1 or euler != 1:
-            raise GeometryError(f"the smooth surface patch '{patch.id}' ({patch.names[0] if patch.names else 'unnamed'}"
-                                f", {len(loops)} border loops, Euler characteristic {euler}) is not a disk, a plane or a "
-                                "cylinder and cannot be flattened", where=source,
-                                fix="lower geometry.feature_angle so that feature curves cut it into disk-like "
-                                    "patches, or split the face in the CAD model")
-        loop = np.asarray(loops[0])
-        pinned = np.array([loop[0], loop[len(loop) // 2]])
-        span = np.linalg.norm(self.vertices[pinned[1]] - self.vertices[pinned[0]])
-        uv, _ = igl.lscm(self.vertices, self.faces, pinned, np.array([[0.0, 0.0], [span, 0.0]]))
-        area = _signed_areas(uv, self.faces)
-        if np.sum(area < 0) * 2 > len(area):
-            uv[:, 0] *= -1
-            area = -area
-        if np.any(area <= 0):
-            raise GeometryError(f"surface patch '{patch.id}' folds over when flattened", where=source,
-                                fix="lower geometry.feature_angle so that feature curves split it")
+        uv = conformal_map(self.vertices, self.faces)
+        if uv is None:
+            raise GeometryError(f"the smooth surface patch '{patch.id}' (centroid {_where(patch)}) folds over or "
+                                "stretches when flattened", where=source,
+                                fix="lower geometry.feature_angle so that feature curves cut it")
         return uv
+
+
+def _where(patch) -> str:
+    return ", ".join(f"{x:.4g}" for x in patch.centroid)
 
 
 def _cross2(a, b):
