@@ -45,7 +45,7 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
     target = Path(target)
     if target.suffix.lower() in SURFACE_FORMATS:
         geometry = load_surface(target, allow_multiple_solids=True)
-        features = detect_features(geometry, 30.0 if feature_angle is None else feature_angle)
+        features = detect_features(geometry) if feature_angle is None else detect_features(geometry, feature_angle)
     else:
         from .job import load_job
         from .pipeline import build_geometry
