@@ -20,9 +20,11 @@ from .schema import INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, pos
 from .yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
-ANCHORS = ("point", "curve", "surface", "region", "domain")
+ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap")
 LAWS = ("constant", "linear", "geometric", "power")
-SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap")
+SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap", "wall_thickness", "gap_width")
+DOMINANCE = ("membership", "tie")
+LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width"}   # anchors on the local size, their L
 FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "named"),
                  "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
 COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
@@ -250,6 +252,7 @@ class Pattern:
     roles: dict[str, tuple[str | None, str]]
     zones: list[Zone]
     source: str
+    dominance: str = "membership"   # or "tie": its mu is the other patterns' highest, the smaller h wins
 
     def expression_names(self) -> set[str]:
         names = set(self.parameters) | {"H"}
@@ -265,6 +268,9 @@ PATTERN_FILE = {
     "anchor": Field(STRING, required=True, choices=ANCHORS, doc="what the pattern is placed on"),
     "accepts": Field(LIST, default=[], items=Field(STRING), doc="feature kinds 'every:' may place it on"),
     "scale": Field(STRING, default="none", choices=SCALES, doc="what the length L in expressions is"),
+    "dominance": Field(STRING, default="membership", choices=DOMINANCE,
+                       doc="'membership': its own mu competes; 'tie': where it reaches, it ties with the "
+                           "strongest other pattern, so it wins only where it asks for smaller elements"),
     "parameters": Field(MAPPING, default={}, open_keys=True, doc="NAME: {default: NUMBER, doc: TEXT}"),
     "roles": Field(MAPPING, default={}, open_keys=True, doc="other features the pattern uses: ROLE: {default, doc}"),
     "zones": Field(LIST, required=True, doc="one or more zones"),
@@ -308,8 +314,14 @@ def load_pattern(raw: Located, source: str) -> Pattern:
             raise _err(f"role name '{name}' is not an identifier", raw["roles"].where(name))
         r = validate(body, ROLE, KnowledgeError, f"roles.{name}", raw["roles"].where(name))
         roles[str(name)] = (r["default"], r["doc"])
+    local_scale = LOCAL_SCALES.get(spec["anchor"])
+    if (local_scale or spec["scale"] in LOCAL_SCALES.values()) and spec["scale"] != local_scale:
+        raise _err(f"anchor '{spec['anchor']}' and scale '{spec['scale']}' do not go together",
+                   raw.where("scale") if "scale" in raw else raw.where("anchor"),
+                   "anchor thin-wall takes scale wall_thickness, narrow-gap takes gap_width, and those scales "
+                   "no other anchor")
     pattern = Pattern(spec["name"], spec["doc"], spec["anchor"], spec["accepts"], spec["scale"], params, roles,
-                      [], source)
+                      [], source, spec["dominance"])
     names = pattern.expression_names()
     gap_names = names | {f"gap_{role}" for role in roles}
     if not spec["zones"]:
@@ -490,6 +502,8 @@ SIZING_FILE = {
     "gradation": Field(NUMBER, default=1.3, check=in_range(1.01, 3.0),
                        doc="the largest ratio of sizes one element apart: h(y) <= h(x) + (g - 1)|x - y|"),
     "base_pattern": Field(STRING, default="uniform-domain", doc="the pattern placed when a job places none"),
+    "always_place": Field(LIST, default=[], doc="placements added to every job, unless it places the same "
+                                                "pattern itself"),
 }
 
 
@@ -502,7 +516,7 @@ class KnowledgeBase:
     recipes: dict[str, Recipe] = field(default_factory=dict)
     feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
     sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain",
-                                                  "where": "built-in defaults"})
+                                                  "always_place": [], "where": "built-in defaults"})
     packer_settings: dict[str, dict] = field(default_factory=dict)   # rule file id -> its packer settings
 
     def add_file(self, path: Path) -> None:
@@ -532,6 +546,9 @@ class KnowledgeBase:
         else:
             self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
             self.sizing["where"] = raw.where("base_pattern")
+            if "always_place" in raw:
+                self.sizing["always_place"] = load_placements(raw["always_place"], raw.where("always_place"),
+                                                              "sizing defaults", "always")
 
     def _unique(self, table: dict, key: str, value, where: str) -> None:
         if key in table:
@@ -540,10 +557,12 @@ class KnowledgeBase:
         table[key] = value
 
     def check(self) -> None:
-        """Cross-file checks: recipes name existing patterns, parameters and roles."""
+        """Cross-file checks: recipes and the sizing defaults name existing patterns, parameters and roles."""
         for recipe in self.recipes.values():
             for placement in recipe.placements:
                 check_placement(self, placement)
+        for placement in self.sizing["always_place"]:
+            check_placement(self, placement)
         if self.sizing["base_pattern"] not in self.patterns and self.patterns:
             raise _err(f"base pattern '{self.sizing['base_pattern']}' is not in the pattern library",
                        self.sizing["where"], f"name one of: {', '.join(sorted(self.patterns))}")
@@ -568,12 +587,15 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
         raise _err(f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}", placement.source,
                    "give them under 'parameters:'")
     anchor_key = {"point": ("point", "at"), "curve": ("at", "every"), "surface": ("at", "every"),
-                  "region": ("region",), "domain": ()}[pattern.anchor]
+                  "region": ("region",), "domain": (), "thin-wall": (), "narrow-gap": ()}[pattern.anchor]
     given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
     if pattern.anchor == "domain" and given:
         raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'",
                    placement.where(given[0]), f"remove '{given[0]}:'")
-    if pattern.anchor != "domain" and (not given or given[0] not in anchor_key):
+    if not anchor_key and given:
+        raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) finds its place on the solid by itself "
+                   f"and takes no '{given[0]}'", placement.where(given[0]), f"remove '{given[0]}:'")
+    if anchor_key and (not given or given[0] not in anchor_key):
         raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) needs one of: {', '.join(anchor_key)}",
                    placement.where(given[0]) if given else placement.source)
     if placement.every is not None:

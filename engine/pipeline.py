@@ -70,7 +70,8 @@ def build_geometry(job: Job):
 
 
 def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
-    """The recipe's placements, then the job's own; the base pattern alone when neither places any."""
+    """The recipe's placements, then the job's own (the base pattern alone when neither places any), then the
+    sizing defaults' ``always_place`` for every pattern not placed yet."""
     placements = []
     if job.recipe is not None:
         if job.recipe not in kb.recipes:
@@ -81,7 +82,8 @@ def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
     if not placements:
         base = kb.sizing["base_pattern"]
         placements = [Placement(base, "base", None, None, None, None, {}, {}, None, job.where(), "default")]
-    return placements
+    placed = {p.pattern for p in placements}
+    return placements + [p for p in kb.sizing["always_place"] if p.pattern not in placed]
 
 
 def check_job_knowledge(job: Job, kb: KnowledgeBase) -> list[Placement]:

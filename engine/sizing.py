@@ -25,7 +25,8 @@ from scipy import ndimage
 from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_distance, patch_distance
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
-from .knowledge import KnowledgeBase, Placement, Zone, check_placement
+from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement
+from .thickness import local_size
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +88,7 @@ class PlacedPattern:
     zones: list[BoundZone]
     distance: object
     roles: dict = field(default_factory=dict)   # role -> distance to the role feature(s)
+    ties: bool = False     # dominance 'tie': where it reaches, its mu is the highest of the other patterns
 
     @property
     def reach(self) -> float:
@@ -146,6 +148,8 @@ class PlacedPattern:
             mu_low = np.maximum(mu_low, low)
             mu_high = np.maximum(mu_high, high)
             h_low = np.minimum(h_low, size_low)
+        if self.ties:   # its mu follows the others': it can win wherever it reaches, and outranks none
+            mu_low, mu_high = np.zeros(n), np.where(mu_high > 0, 1.0, 0.0)
         return mu_low, mu_high, h_low
 
     def legend(self) -> dict:
@@ -193,6 +197,7 @@ class SizingField:
         mu, size, zone = np.empty((count, n)), np.empty((count, n)), np.empty((count, n), dtype=np.int64)
         for k, placed in enumerate(self.placed):
             mu[k], size[k], zone[k] = placed.evaluate(points)
+        _tie(mu, np.array([placed.ties for placed in self.placed]))
         winner, runner_up = _dominance(mu, size)
         rows = np.arange(n)
         safe = np.maximum(winner, 0)
@@ -290,6 +295,15 @@ def _cells_near(distance, bound: float, origin: np.ndarray, cell: float, shape: 
     return np.ravel_multi_index(np.ix_(*[np.arange(a, b + 1) for a, b in zip(first, last)]), shape).ravel()
 
 
+def _tie(mu: np.ndarray, ties: np.ndarray) -> None:
+    """Where a tying pattern reaches (mu > 0), its mu becomes the highest mu of the other patterns (its own
+    where none reaches), so it ties with the winner and wins only with the smaller size. In place."""
+    if not ties.any():
+        return
+    top = mu[~ties].max(axis=0) if (~ties).any() else np.zeros(mu.shape[1])
+    mu[ties] = np.where(mu[ties] > 0, np.where(top > 0, top, mu[ties]), 0.0)
+
+
 def _membership_at(zone: BoundZone, d: np.ndarray) -> np.ndarray:
     """The zone's membership at distances d (0 for infinite d)."""
     return zone.membership(np.where(np.isfinite(d), d, np.inf))
@@ -333,12 +347,15 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
     for placement in placements:
         pattern = check_placement(kb, placement)
         anchors = _anchors(pattern, placement, features, geometry)
-        if not anchors:
+        local = pattern.anchor in LOCAL_SCALES
+        if not anchors and not local:
             log.info("note: %s places '%s' on %s, but the solid has none; not placed (%s)", placement.origin,
                      pattern.name, placement.every or placement.at, placement.source)
         for feature, make_distance in anchors:
-            placed.append(_bind_one(pattern, placement, feature, make_distance, features, geometry, global_size,
-                                    multiple=len(anchors) > 1))
+            one = _bind_one(pattern, placement, feature, make_distance, features, geometry, global_size,
+                            multiple=len(anchors) > 1 or local)
+            if one.zones or not local:   # a class of walls (gaps) whose zones are all off sizes nothing
+                placed.append(one)
     return placed
 
 
@@ -349,6 +366,8 @@ def _anchors(pattern, placement, features, geometry):
     if pattern.anchor == "region":
         region = RegionDistance(placement.region, placement.source)
         return [(None, lambda spacing: region)]
+    if pattern.anchor in LOCAL_SCALES:
+        return [(part, part.distance) for part in local_size(geometry).parts(pattern.anchor)]
     if pattern.anchor == "point":
         if placement.point is not None:
             point = np.asarray(placement.point, dtype=float)
@@ -390,6 +409,8 @@ def _length(pattern, placement, feature, features):
         return float(placement.scale)
     if pattern.scale == "none":
         return None
+    if pattern.scale in LOCAL_SCALES.values():
+        return feature.length
     if pattern.scale in ("radius", "fillet_radius") and feature is not None:
         circle = getattr(feature, "circle", None)
         cylinder = getattr(feature, "cylinder", None)
@@ -468,7 +489,7 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
         zones.append(BoundZone(zone, near, far, over, exponent, trapezoid, height, role, gap))
     suffix = f"@{feature.id}" if feature is not None and (multiple or placement.every) else ""
     return PlacedPattern(placement.id + suffix, pattern.name, placement, getattr(feature, "id", None), L, params,
-                         zones, distance, roles)
+                         zones, distance, roles, ties=pattern.dominance == "tie")
 
 
 # ------------------------------------------------------------------------- count estimate

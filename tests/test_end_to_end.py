@@ -84,7 +84,8 @@ def test_same_seed_same_mesh_other_seed_other_mesh(tmp_path):
 
 
 def test_command_line_overrides(tmp_path):
-    job = write_job(tmp_path, {"geometry": {"shape": "plate"}, "size": 40.0})
+    # a thick plate: the thin-wall rule (2 elements through the thickness) caps neither size
+    job = write_job(tmp_path, {"geometry": {"shape": "plate", "parameters": {"thickness": 100}}, "size": 40.0})
     assert main(["mesh", str(job), "--size", "25", "--out", str(tmp_path / "other"), "--quiet"]) == 0
     coarse = meshio.read(tmp_path / "other" / "mesh.vtu")
     assert main(["mesh", str(job), "--quiet"]) == 0
