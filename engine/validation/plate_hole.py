@@ -30,6 +30,7 @@ MATERIAL = Material(E=200e3, nu=0.3)    # steel, MPa
 TENSION = 100.0                          # MPa on the end faces
 PLATE = dict(length=200.0, width=100.0, thickness=10.0, hole_radius=10.0)
 HOLE_NEAR, HOLE_FAR = 0.125, 1.0        # the hole pattern's defaults (times the radius)
+THROUGH = 2.0                           # the thin-wall pattern's default: elements through the plate
 THICKNESS_SAMPLES = 201                 # points along each root line for the through-thickness mean
 
 
@@ -44,20 +45,28 @@ def default_size() -> float:
     return float(np.linalg.norm([PLATE["length"], PLATE["width"], PLATE["thickness"]])) / SIZE_FROM_SCALE
 
 
+def thin_wall(scale: float) -> dict:
+    """The always-placed thin-wall pattern with its size (thickness / through) times ``scale``."""
+    return {"pattern": "thin-wall", "parameters": {"through": THROUGH / scale}}
+
+
 def graded_placements(scale: float) -> list[dict]:
     """The static-stress recipe's placements on the plate (its re-entrant-edge pattern finds no edge there)
-    with the hole pattern's near and far sizes times ``scale``."""
+    with the hole pattern's near and far sizes times ``scale``, and the thin-wall pattern's size too."""
     return [{"pattern": "uniform-domain"},
-            {"pattern": "hole", "every": "hole", "parameters": {"near": HOLE_NEAR * scale, "far": HOLE_FAR * scale}}]
+            {"pattern": "hole", "every": "hole", "parameters": {"near": HOLE_NEAR * scale, "far": HOLE_FAR * scale}},
+            thin_wall(scale)]
 
 
 def job(scale: float = 1.0, graded: bool = True, seed: int = 0) -> dict:
     """The plate's job. Graded: the static-stress recipe (scale 1), else its placements with every size times
-    ``scale`` (the global size too). Uniform: the base pattern alone at ``scale`` x the default size."""
+    ``scale`` (the global size too). Uniform: the base pattern at ``scale`` x the default size, with the thin-wall
+    pattern's size times ``scale`` (the plate is thin everywhere: 2 / scale elements through it)."""
     data = {"geometry": {"shape": "plate_with_hole", "parameters": dict(PLATE)}, "seed": seed}
     if graded and scale == 1.0:
         return {**data, "recipe": "static-stress"}
-    return {**data, "size": scale * default_size(), **({"place": graded_placements(scale)} if graded else {})}
+    return {**data, "size": scale * default_size(),
+            "place": graded_placements(scale) if graded else [{"pattern": "uniform-domain"}, thin_wall(scale)]}
 
 
 def solve_plate(result) -> dict:

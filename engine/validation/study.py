@@ -1,8 +1,9 @@
 """The convergence study of case ``plate-hole``: Kt error against node count, graded against uniform.
 
 Two series of meshes of the same plate: *graded* is the static-stress recipe with every target size
-times a scale s (s = 1 is the recipe's default mesh), *uniform* is the base pattern alone at global
-size s x the default size. Each scale is meshed with several seeds (coarse meshes scatter by a few
+times a scale s (s = 1 is the recipe's default mesh), *uniform* is the base pattern at global size
+s x the default size (with the always-placed thin-wall pattern's size times s too: the plate is thin
+everywhere, so that is a uniform size s x 5). Each scale is meshed with several seeds (coarse meshes scatter by a few
 percent from seed to seed) and solved (``plate_hole.solve_plate``); its Kt is compared with
 Peterson's. Per scale, the means over the seeds of the node count and of the signed error make the
 series; the node count from which a series stays within ``TARGET`` |error| is interpolated (log-log)
