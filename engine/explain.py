@@ -17,6 +17,7 @@ def explain_point(sizing: SizingField, point, inside: bool | None = None) -> str
         mu, h = audit.mu[0, k], audit.sizes[0, k]
         tag = " <- winner" if k == winner else (" <- runner-up" if k == runner_up else "")
         reach = f"mu = {mu:.4f}, h = {h:.6g}" if mu > 0 else "mu = 0 (out of reach)"
+        reach += " (dominance tie: the others' highest mu)" if placed.ties and mu > 0 else ""
         lines.append(f"  {placed.id}: pattern '{placed.pattern}', {reach}{tag}")
         lines.append(f"      placed by {placed.placement.origin} at {placed.placement.source}"
                      + (f", on {placed.feature}" if placed.feature else "")
@@ -26,7 +27,9 @@ def explain_point(sizing: SizingField, point, inside: bool | None = None) -> str
         zone = placed.zones[int(audit.zone[0])]
         lines.append(f"winner: {placed.id} (highest mu {audit.mu[0, winner]:.4f}"
                      + (f" over runner-up {sizing.placed[runner_up].id} with {audit.mu[0, runner_up]:.4f}"
-                        if runner_up >= 0 else ", no other pattern reaches here") + ")")
+                        if runner_up >= 0 else ", no other pattern reaches here")
+                     + (", a tie: the smaller h wins"
+                        if runner_up >= 0 and audit.mu[0, runner_up] == audit.mu[0, winner] else "") + ")")
         lines.append(f"  its zone '{zone.zone.id}' ({zone.zone.law} law, {zone.zone.source}) sets the raw size "
                      f"h = {audit.raw[0]:.6g}")
     else:

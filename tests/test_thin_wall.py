@@ -12,6 +12,7 @@ import yaml
 
 from engine.cli import main
 from engine.errors import LimitError
+from engine.explain import explain_point
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
 from engine.pipeline import build_geometry, build_sizing, job_placements
@@ -140,6 +141,15 @@ def test_thin_wall_sizes_a_thin_plate_and_never_coarsens_a_finer_pattern():
     best = sizes[np.arange(len(points)), np.argmax(mu, axis=1)]   # the winner without the tying patterns
     won = audit.winner == thin
     assert won.any() and (audit.sizes[won, thin] < best[won]).all(), "it wins only where it asks for smaller"
+
+
+def test_explain_names_the_thin_wall_and_its_tie():
+    job = job_from_dict({"geometry": {"shape": "plate", "parameters": {"thickness": 4}}, "size": 10.0})
+    geometry, features = build_geometry(job)
+    text = explain_point(build_sizing(job, geometry, features, KB), [0, 0, 2], inside=True)
+    assert "thin-wall@wall-3.36: pattern 'thin-wall', mu = 0.2500, h = 2 (dominance tie" in text
+    assert "winner: thin-wall@wall-3.36 (highest mu 0.2500 over runner-up base with 0.2500, a tie" in text
+    assert "L = 4" in text and "element size h = 2" in text
 
 
 def test_a_thick_part_gets_no_thin_wall():
