@@ -10,7 +10,7 @@ arc length; closed circular curves carry centre, axis and radius.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import igl
 import numpy as np
@@ -55,7 +55,8 @@ class Curve:
     id: str
     points: np.ndarray              # (n, 3) ordered; a closed curve does not repeat its first point
     closed: bool
-    vertices: np.ndarray | None     # surface vertex index of each point, None for a given curve
+    vertices: np.ndarray | None     # the surface vertices it runs through, in order (None for a given curve);
+                                    # the points are these but for a smooth cut's zigzag (_unzigzagged)
     convex: bool | None = None      # None for a given curve
     circle: Circle | None = None
     names: list[str] = field(default_factory=list)
@@ -165,13 +166,35 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     sharp_edges = mesh.face_adjacency_edges[sharp]
     corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
                               truly_sharp[sharp], threshold)
-    return Features(corners, curves, patches, face_patch, feature_angle)
+    return Features(corners, [c if c.sharp else _unzigzagged(c) for c in curves], patches, face_patch, feature_angle)
+
+
+def _unzigzagged(curve: Curve) -> Curve:
+    """A smooth cut without the teeth of its zigzag along the input's edges: a point whose neighbours lie
+    nearer to each other than to it is dropped (every other one of a run), until none is left. A cut
+    across a CAD tessellation's long facets runs along their diagonals, several times longer than the cut;
+    bubbles spaced along that zigzag would crowd. The points left are input vertices on one side of the
+    facets; ``vertices`` still name all the input edges the cut follows (the patches' sides)."""
+    points = curve.points
+    for _ in range(len(points)):
+        behind, ahead = np.roll(points, 1, axis=0), np.roll(points, -1, axis=0)
+        across = np.linalg.norm(ahead - behind, axis=1)
+        spike = across < np.minimum(np.linalg.norm(points - behind, axis=1), np.linalg.norm(ahead - points, axis=1))
+        if not curve.closed:
+            spike[[0, -1]] = False
+        if len(points) - spike.sum() < (3 if curve.closed else 2) or not spike.any():
+            break
+        run_start = np.maximum.accumulate(np.where(spike & ~np.roll(spike, 1), np.arange(len(spike)), 0))
+        points = points[~(spike & ((np.arange(len(spike)) - run_start) % 2 == 0))]
+    return replace(curve, points=points) if len(points) < len(curve.points) else curve
 
 
 CHART_CONE = 90.0    # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
 MAX_STRETCH = 1.6    # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
 COPLANAR = 1e-3      # radians: faces meeting at a smaller angle lie in one plane
 MAX_SPLITS = 16      # halvings of a piece's normal spread before it is taken as it is
+SEED_BAND = 0.25     # a halved piece's faces in this top and bottom share of their normals' spread stay apart
+SMOOTHING = 4        # rounds of neighbour averaging of the normals' spread before the seeds are chosen
 
 
 def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray) -> list[np.ndarray]:
@@ -214,22 +237,17 @@ def _components(n: int, pairs: np.ndarray) -> np.ndarray:
 def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
     """``faces`` (connected) as pieces that lie on a cylinder or can be flattened.
 
-    A piece that is neither is halved: the faces whose normals lie farthest
-    apart along the direction in which they spread most seed two regions, and
-    every face joins the seed it reaches with the least turning of the normal
-    along the surface (a graph Voronoi diagram, Dijkstra over face adjacency,
-    weighted by the angle between neighbouring faces): both halves are
-    connected and their border runs where the normal turns midway.
+    A piece that is neither is halved: its faces whose normals lie in the
+    upper and the lower quarter of their spread along the direction in which
+    they spread most are kept apart by the shortest cut along the input's
+    edges (a minimum cut of the face graph, capacities the shared edges'
+    lengths). A cut along the level line of the normal instead would zigzag
+    across the long facets of a CAD tessellation (a torus cut across its tube
+    ran 10x its length).
     """
-    n = len(mesh.faces)
     normals, centres = mesh.face_normals, mesh.triangles_center
-    weight = mesh.face_adjacency_angles + 1e-3 * np.linalg.norm(
-        centres[mesh.face_adjacency[:, 0]] - centres[mesh.face_adjacency[:, 1]], axis=1) / max(mesh.scale, 1e-300)
-    key = np.minimum(mesh.face_adjacency[:, 0], mesh.face_adjacency[:, 1]) * n + \
-        np.maximum(mesh.face_adjacency[:, 0], mesh.face_adjacency[:, 1])
-    order = np.argsort(key)
-    pair_key = pairs.min(axis=1) * n + pairs.max(axis=1)
-    pair_weight = weight[order[np.searchsorted(key[order], pair_key)]]
+    ends = mesh.vertices[_shared_edges(mesh, pairs)]
+    length = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1)
     todo, pieces = [(faces, 0)], []
     while todo:
         piece, depth = todo.pop()
@@ -240,16 +258,51 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray) -> list[np.nda
             continue
         spread = normals[piece] - normals[piece].mean(axis=0)
         along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
-        local = np.full(n, -1)
+        local = np.full(len(mesh.faces), -1)
         local[piece] = np.arange(len(piece))
         inner = (local[pairs[:, 0]] >= 0) & (local[pairs[:, 1]] >= 0)
-        a, b = local[pairs[inner, 0]], local[pairs[inner, 1]]
-        graph = sparse.coo_matrix((pair_weight[inner], (a, b)), shape=(len(piece),) * 2).tocsr()
-        seeds = [int(np.argmin(along)), int(np.argmax(along))]
-        _, _, source = csgraph.dijkstra(graph, directed=False, indices=seeds, min_only=True, return_predecessors=True)
-        for seed in seeds:
-            todo.append((piece[source == seed], depth + 1))
+        near = sparse.coo_matrix((np.ones(inner.sum()), tuple(local[pairs[inner]].T)), shape=(len(piece),) * 2)
+        near = (near + near.T).tocsr()
+        for _ in range(SMOOTHING):   # faceting noise (a quad's two triangles) must not interleave the seeds
+            along = (along + near @ along) / (1.0 + np.asarray(near.sum(axis=1)).ravel())
+        along = (along - along.min()) / max(np.ptp(along), 1e-300)
+        side = _min_cut(len(piece), local[pairs[inner]], length[inner], along > 1 - SEED_BAND, along < SEED_BAND)
+        for half in (piece[side], piece[~side]):
+            labels = _components(len(mesh.faces), pairs[inner][np.isin(pairs[inner], half).all(axis=1)])
+            todo += [(half[labels[half] == r], depth + 1) for r in np.unique(labels[half])]
     return sorted(pieces, key=lambda piece: int(piece.min()))
+
+
+def _shared_edges(mesh, pairs: np.ndarray) -> np.ndarray:
+    """(k, 2) vertex indices of the edge each face pair of ``pairs`` (rows of ``face_adjacency``) shares."""
+    n = len(mesh.faces)
+    adjacency = mesh.face_adjacency
+    key = adjacency.min(axis=1) * n + adjacency.max(axis=1)
+    order = np.argsort(key)
+    return mesh.face_adjacency_edges[order[np.searchsorted(key[order], pairs.min(axis=1) * n + pairs.max(axis=1))]]
+
+
+def _min_cut(count: int, pairs: np.ndarray, length: np.ndarray, source: np.ndarray, sink: np.ndarray) -> np.ndarray:
+    """The nodes on the ``source`` side of a minimum cut (capacities ``length``) of a graph of ``count`` nodes
+    joined by ``pairs`` between the ``source`` and the ``sink`` nodes (masks)."""
+    unit = 1e6 / max(length.sum(), 1e-300)          # integer capacities, the whole graph at most ~1e6
+    capacity = np.maximum(1, np.round(length * unit)).astype(np.int32)
+    seeds = np.flatnonzero(source)
+    drains = np.flatnonzero(sink)
+    big = np.int32(2 ** 30)
+    rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.full(len(seeds), count), drains])
+    cols = np.concatenate([pairs[:, 1], pairs[:, 0], seeds, np.full(len(drains), count + 1)])
+    caps = np.concatenate([capacity, capacity, np.full(len(seeds) + len(drains), big, np.int32)])
+    graph = sparse.csr_matrix((caps, (rows, cols)), shape=(count + 2, count + 2))
+    graph.sum_duplicates()
+    flow = csgraph.maximum_flow(graph, count, count + 1).flow
+    residual = graph - flow
+    residual.data[residual.data < 0] = 0
+    residual.eliminate_zeros()
+    reached = csgraph.breadth_first_order(residual, count, directed=True, return_predecessors=False)
+    side = np.zeros(count + 2, bool)
+    side[reached] = True
+    return side[:count]
 
 
 def flattenable(mesh, faces: np.ndarray) -> bool:

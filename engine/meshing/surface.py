@@ -68,20 +68,16 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
 
 
 def arc_parameter(curve, points: np.ndarray) -> np.ndarray:
-    """Arc length along ``curve`` of the closest point to each of ``points``."""
-    line = curve.polyline
-    start, direction = line[:-1], np.diff(line, axis=0)
-    length2 = np.maximum(np.einsum("ij,ij->i", direction, direction), 1e-300)
-    _, nearest = cKDTree(line).query(points)
-    best_s, best_d = np.zeros(len(points)), np.full(len(points), np.inf)
-    for segment in (nearest - 1, nearest):   # the two segments at the nearest polyline vertex
-        segment = np.clip(segment, 0, len(start) - 1)
-        t = np.clip(np.einsum("ij,ij->i", points - start[segment], direction[segment]) / length2[segment], 0, 1)
-        d = np.linalg.norm(start[segment] + t[:, None] * direction[segment] - points, axis=1)
-        better = d < best_d
-        best_d[better] = d[better]
-        best_s[better] = (curve.arc_length[segment] + t * np.sqrt(length2[segment]))[better]
-    return best_s
+    """Arc length along ``curve`` of the closest point to each of ``points`` (exact, libigl AABB over its
+    segments; in [0, length) on a closed curve, so a point at its seam is at 0, not at its length)."""
+    line = np.ascontiguousarray(curve.polyline, dtype=np.float64)
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    if len(points) == 0:
+        return np.zeros(0)
+    segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))]).astype(np.int64)
+    _, segment, closest = igl.point_mesh_squared_distance(points, line, segments)
+    s = curve.arc_length[segment] + np.linalg.norm(closest - line[segment], axis=1)
+    return np.mod(s, curve.length) if curve.closed else s
 
 
 def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
