@@ -99,6 +99,14 @@ def test_graded_series_at_scale_1_is_the_recipe():
     assert np.allclose(build_sizing(recipe, geometry, features, kb)(points),
                        build_sizing(scaled, geometry, features, kb)(points))
     assert job(2.0)["size"] == pytest.approx(2 * default_size())
+    # the study itself reads the sizing defaults without the always-placed thin-wall rule
+    bare = job_from_dict(job(1.0, rules=False))
+    bare_scaled = job_from_dict({**geometry_and_seed, "knowledge": [str(k) for k in bare.knowledge],
+                                 "size": default_size(), "place": graded_placements(1.0, rules=False)})
+    study_kb = load_knowledge(bare.knowledge)
+    study_sizing = build_sizing(bare, geometry, features, study_kb)
+    assert [p.pattern for p in study_sizing.placed] == ["uniform-domain", "hole"]
+    assert np.allclose(study_sizing(points), build_sizing(bare_scaled, geometry, features, study_kb)(points))
 
 
 def test_nodes_at_target_interpolates_where_the_series_stays_within():

@@ -18,6 +18,7 @@ Kt is on the net section: Kt = sigma_root / sigma_nom with sigma_nom = S W / (W 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -31,6 +32,7 @@ TENSION = 100.0                          # MPa on the end faces
 PLATE = dict(length=200.0, width=100.0, thickness=10.0, hole_radius=10.0)
 HOLE_NEAR, HOLE_FAR = 0.125, 1.0        # the hole pattern's defaults (times the radius)
 THROUGH = 2.0                           # the thin-wall pattern's default: elements through the plate
+STUDY_SIZING = Path(__file__).with_name("study-sizing.yaml")   # the shipped sizing without always-placed rules
 THICKNESS_SAMPLES = 201                 # points along each root line for the through-thickness mean
 
 
@@ -50,23 +52,26 @@ def thin_wall(scale: float) -> dict:
     return {"pattern": "thin-wall", "parameters": {"through": THROUGH / scale}}
 
 
-def graded_placements(scale: float) -> list[dict]:
+def graded_placements(scale: float, rules: bool = True) -> list[dict]:
     """The static-stress recipe's placements on the plate (its re-entrant-edge pattern finds no edge there)
-    with the hole pattern's near and far sizes times ``scale``, and the thin-wall pattern's size too."""
+    with the hole pattern's near and far sizes times ``scale``, and with ``rules`` the thin-wall pattern's too."""
     return [{"pattern": "uniform-domain"},
             {"pattern": "hole", "every": "hole", "parameters": {"near": HOLE_NEAR * scale, "far": HOLE_FAR * scale}},
-            thin_wall(scale)]
+            *([thin_wall(scale)] if rules else [])]
 
 
-def job(scale: float = 1.0, graded: bool = True, seed: int = 0) -> dict:
+def job(scale: float = 1.0, graded: bool = True, seed: int = 0, rules: bool = True) -> dict:
     """The plate's job. Graded: the static-stress recipe (scale 1), else its placements with every size times
     ``scale`` (the global size too). Uniform: the base pattern at ``scale`` x the default size, with the thin-wall
-    pattern's size times ``scale`` (the plate is thin everywhere: 2 / scale elements through it)."""
-    data = {"geometry": {"shape": "plate_with_hole", "parameters": dict(PLATE)}, "seed": seed}
+    pattern's size times ``scale`` (the plate is thin everywhere: 2 / scale elements through it). Without
+    ``rules`` (the convergence study: the hole pattern against a uniform size, down to 0.4 elements through the
+    plate) the job reads ``STUDY_SIZING``: no always-placed thin-wall and narrow-gap patterns."""
+    data = {"geometry": {"shape": "plate_with_hole", "parameters": dict(PLATE)}, "seed": seed,
+            **({} if rules else {"knowledge": [str(STUDY_SIZING)]})}
     if graded and scale == 1.0:
         return {**data, "recipe": "static-stress"}
-    return {**data, "size": scale * default_size(),
-            "place": graded_placements(scale) if graded else [{"pattern": "uniform-domain"}, thin_wall(scale)]}
+    uniform = [{"pattern": "uniform-domain"}, *([thin_wall(scale)] if rules else [])]
+    return {**data, "size": scale * default_size(), "place": graded_placements(scale, rules) if graded else uniform}
 
 
 def solve_plate(result) -> dict:
