@@ -14,9 +14,10 @@ constant thickness keeps its pieces (facets first split down to ``START_AREA`` x
 every patch of that area is measured); the surface is cut finer only where the measure changes.
 A piece keeps the smallest of its four measures. Measured once per geometry (:func:`local_size`).
 
-Pieces are grouped in classes of thickness (gap) [q^k, q^(k+1)), q = ``CLASS_RATIO``: each class is one
-anchor of a ``thin-wall`` (``narrow-gap``) pattern, with L the smallest measure of its pieces, so a
-placed pattern has one L and its sizes and bounds stay exact (see :mod:`engine.sizing`).
+Pieces are grouped in classes of thickness (gap) [L, q L), q = ``CLASS_RATIO``, L the smallest measure not in
+a class yet: each class is one anchor of a ``thin-wall`` (``narrow-gap``) pattern, with its L, so a placed
+pattern has one L and its sizes and bounds stay exact (see :mod:`engine.sizing`). :func:`classes` does this
+for any measure over surface pieces (the radius of curvature too, :mod:`engine.curvature`).
 """
 from __future__ import annotations
 
@@ -39,9 +40,10 @@ MEASURES = {"thin-wall": "thickness", "narrow-gap": "gap"}   # anchor kind -> wh
 
 @dataclass
 class LocalPart:
-    """The surface pieces of one class of a measure: one anchor of a thin-wall or narrow-gap pattern."""
+    """The surface pieces of one class of a measure: one anchor of a thin-wall, narrow-gap or curvature
+    pattern."""
 
-    id: str                   # e.g. "wall-0.297": the pieces measuring [0.297, 0.297 q)
+    id: str                   # e.g. "wall-0.297": L in [0.297, 0.297 q), its pieces measuring [L, q L)
     length: float             # L: the smallest measure of its pieces
     triangles: np.ndarray     # (m, 3, 3)
 
@@ -63,12 +65,24 @@ class LocalSize:
 
     def parts(self, anchor: str) -> list[LocalPart]:
         """The pieces of the anchor kind's measure, in classes, thinnest first."""
-        measure = getattr(self, MEASURES[anchor])
-        finite = np.flatnonzero(np.isfinite(measure))
-        level = np.floor(np.log(measure[finite]) / np.log(CLASS_RATIO)).astype(np.int64)
-        prefix = "wall" if anchor == "thin-wall" else "gap"
-        return [LocalPart(f"{prefix}-{CLASS_RATIO ** k:.3g}", float(measure[finite[level == k]].min()),
-                          self.triangles[finite[level == k]]) for k in np.unique(level)]
+        return classes(self.triangles, getattr(self, MEASURES[anchor]), "wall" if anchor == "thin-wall" else "gap")
+
+
+def classes(triangles: np.ndarray, measure: np.ndarray, prefix: str) -> list[LocalPart]:
+    """Pieces (m, 3, 3) with a measure each (inf: none) in classes, smallest first: a class starts at the smallest
+    measure L not in one yet and takes every piece measuring below q L, q = ``CLASS_RATIO`` (so measures scattered
+    about a power of q make one class, not two). One part per class: L, its pieces, id ``PREFIX-q^k`` (q^k <= L)."""
+    order = np.flatnonzero(np.isfinite(measure))
+    order = order[np.argsort(measure[order], kind="stable")]
+    values = measure[order]
+    parts, start = [], 0
+    while start < len(order):
+        end = int(np.searchsorted(values, values[start] * CLASS_RATIO))
+        level = np.floor(np.log(values[start]) / np.log(CLASS_RATIO))
+        parts.append(LocalPart(f"{prefix}-{CLASS_RATIO ** level:.3g}", float(values[start]),
+                               triangles[np.sort(order[start:end])]))
+        start = end
+    return parts
 
 
 def local_size(geometry) -> LocalSize:
