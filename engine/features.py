@@ -130,8 +130,8 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     marks faces that form patches of their own even where they meet their
     neighbours smoothly (e.g. a tangent fillet). Their borders become curves,
     as does the cut that halves a smooth closed patch (a sphere's surface).
-    Sharp edges that separate no two patches (a coarse faceting's creases
-    inside one smooth surface) are not features. A smooth patch that is
+    Sharp edges below CREASE x the feature angle that separate no two patches
+    (a coarse faceting's creases inside one smooth surface) are not features. A smooth patch that is
     neither a plane nor a cylinder is cut into charts (see :func:`chart_pieces`):
     its planar faces, its cylinders (a fillet, a hole wall) and pieces of
     bounded normal spread, each of which can be flattened; the cuts are
@@ -147,9 +147,10 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     truly_sharp = sharp.copy()
     sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
     patches, face_patch = _patches(geometry, adjacency[~sharp])
-    inside = face_patch[adjacency[:, 0]] == face_patch[adjacency[:, 1]]
-    sharp &= ~inside
-    truly_sharp &= ~inside
+    crease = (face_patch[adjacency[:, 0]] == face_patch[adjacency[:, 1]]) & \
+        (mesh.face_adjacency_angles < CREASE * threshold)
+    sharp &= ~crease
+    truly_sharp &= ~crease
     closed = np.setdiff1d(np.arange(len(patches)), face_patch[adjacency[sharp]])
     if len(closed):   # a smooth closed patch (a sphere) is cut in two, so that every patch has a border
         for k, p in enumerate(closed, start=group.max() + 1):
@@ -189,9 +190,11 @@ def _unzigzagged(curve: Curve) -> Curve:
     return replace(curve, points=points) if len(points) < len(curve.points) else curve
 
 
+CREASE = 2.0         # a sharp edge inside one patch below this x the feature angle is a faceting crease
 CHART_CONE = 90.0    # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
 MAX_STRETCH = 1.6    # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
 COPLANAR = 1e-3      # radians: faces meeting at a smaller angle lie in one plane
+WIDE = 3.0           # a coplanar region this many times wider than the facets it bends into is a plane
 MAX_SPLITS = 16      # halvings of a piece's normal spread before it is taken as it is
 SEED_BAND = 0.25     # a halved piece's faces in this top and bottom share of their normals' spread stay apart
 SMOOTHING = 4        # rounds of neighbour averaging of the normals' spread before the seeds are chosen
@@ -200,8 +203,8 @@ SMOOTHING = 4        # rounds of neighbour averaging of the normals' spread befo
 def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray) -> list[np.ndarray]:
     """The charts a smooth patch (``faces``) is cut into; one piece when it can be flattened whole.
 
-    First its planar regions (faces all of whose neighbours in the patch are
-    coplanar, grown across coplanar edges); then each connected rest is one
+    First its planar regions (coplanar faces, wide against the facets they bend
+    into: :func:`_wide`); then each connected rest is one
     piece if it lies on a cylinder or can be flattened (:func:`flattenable`),
     else it is halved across its widest spread of normals until every piece can.
     ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges.
@@ -212,10 +215,8 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     n = len(mesh.faces)
     in_patch = np.zeros(n, bool)
     in_patch[faces] = True
-    core = in_patch.copy()
-    core[pairs[bent].ravel()] = False
     region = _components(n, pairs[~bent])
-    planar_regions = np.unique(region[core])
+    planar_regions = np.unique(region[in_patch][_wide(mesh, region, pairs[bent])[region[in_patch]]])
     planar = np.isin(region, planar_regions) & in_patch
     if not planar.any() and flattenable(mesh, faces):
         return [faces]
@@ -226,6 +227,27 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     for r in np.unique(labels[rest]):
         pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep])
     return pieces
+
+
+def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
+    """Per region label: whether that coplanar region is a face of its own, not one facet strip of a curved
+    surface: it has a face none of whose edges bends, or it is wider (its area over the length of its
+    bending border) than WIDE x the faces it bends into (their height over the shared edge). A CAD
+    tessellation's flat wall of two triangles beside a fillet is wide; a cylinder's strip is not."""
+    count = int(region.max()) + 1
+    ends = mesh.vertices[_shared_edges(mesh, bent)]
+    length = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1)
+    area = mesh.area_faces
+    bends = np.zeros(len(region), bool)
+    bends[bent.ravel()] = True
+    flat_face = np.bincount(region[~bends], minlength=count) > 0
+    side, other = bent.ravel(), bent[:, ::-1].ravel()
+    length = np.repeat(length, 2)              # per (face, face it bends into) of side, other
+    border = np.bincount(region[side], weights=length, minlength=count)
+    height = 2 * area[other] / np.maximum(length, 1e-300)
+    beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
+    width = np.bincount(region, weights=area, minlength=count) / np.maximum(border, 1e-300)
+    return flat_face | (width > WIDE * beyond)
 
 
 def _components(n: int, pairs: np.ndarray) -> np.ndarray:

@@ -186,9 +186,12 @@ def test_a_smooth_torus_is_cut_into_charts_and_meshed(tmp_path):
     volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
     assert (volumes > 0).all()
     assert volumes.sum() == pytest.approx(surface.volume, rel=0.01)
-    on_surface = mesh.points[mesh.point_data["node_level"] < 3]
-    tube = np.hypot(np.hypot(on_surface[:, 0], on_surface[:, 1]) - 20.0, on_surface[:, 2])
-    assert np.abs(tube - 6.0).max() < 6.0 * 0.01, "surface nodes on the torus (within its faceting)"
+    def off_torus(points):
+        return np.abs(np.hypot(np.hypot(points[:, 0], points[:, 1]) - 20.0, points[:, 2]) - 6.0)
+
+    faceting = off_torus(np.vstack([surface.sample(20_000, seed=0), surface.triangles_center])).max()
+    assert off_torus(mesh.points[mesh.point_data["node_level"] < 3]).max() <= faceting * 1.05, \
+        "surface nodes on the input surface"
     assert tet_quality(mesh.points, mesh.cells_dict["tetra"]).min_dihedral.min() >= 10.0
 
 

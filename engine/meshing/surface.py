@@ -20,6 +20,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
+from ..describe import describe
 from ..errors import GeometryError
 from ..features import conformal_map
 from ..packing import CORNER, CURVE, PATCH, Packing
@@ -437,14 +438,10 @@ class PatchChart:
     def _conformal_map(self, patch, source) -> np.ndarray:
         uv = conformal_map(self.vertices, self.faces)
         if uv is None:
-            raise GeometryError(f"the smooth surface patch '{patch.id}' (centroid {_where(patch)}) folds over or "
+            raise GeometryError(f"the smooth surface patch {describe(patch)} folds over or "
                                 "stretches when flattened", where=source,
                                 fix="lower geometry.feature_angle so that feature curves cut it")
         return uv
-
-
-def _where(patch) -> str:
-    return ", ".join(f"{x:.4g}" for x in patch.centroid)
 
 
 def _cross2(a, b):
@@ -493,13 +490,17 @@ def _delaunay(uv) -> np.ndarray:
 
 def _inside_regions(tri, constraints):
     """Triangles on the left of the directed constrained edges, flooded across the other edges,
-    and the constrained edges missing from ``tri`` (then nothing is flooded)."""
+    and the constrained edges missing from ``tri`` (then nothing is flooded). An edge constrained in
+    both directions (a sharp crease that ends inside the patch) stays an edge but tells no side."""
     n = int(max(tri.max(initial=0), constraints.max(initial=0))) + 1
     half = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)   # directed edges, 3 per triangle
     owner = np.repeat(np.arange(len(tri)), 3)
     key = half[:, 0] * n + half[:, 1]
     forward = np.isin(key, constraints[:, 0] * n + constraints[:, 1])
     backward = np.isin(key, constraints[:, 1] * n + constraints[:, 0])
+    crease = forward & backward        # a sharp crease that ends inside the patch: the patch on both sides
+    link_blocked = forward | backward
+    forward, backward = forward & ~crease, backward & ~crease
     lost = ~np.isin(constraints[:, 0] * n + constraints[:, 1], key) & ~np.isin(constraints[:, 1] * n + constraints[:, 0], key)
     if lost.any():
         return np.zeros(len(tri), bool), constraints[lost]
@@ -508,7 +509,7 @@ def _inside_regions(tri, constraints):
     at = np.clip(np.searchsorted(key[order], twin_key), 0, len(key) - 1)
     has_twin = key[order][at] == twin_key
     twin_owner = np.where(has_twin, owner[order][at], -1)
-    link = has_twin & ~forward & ~backward
+    link = has_twin & ~link_blocked
     graph = sparse.coo_matrix((np.ones(link.sum()), (owner[link], twin_owner[link])), shape=(len(tri),) * 2)
     count, region = csgraph.connected_components(graph, directed=False)
     votes_in = np.bincount(region[owner[forward]], minlength=count)
