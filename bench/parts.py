@@ -205,6 +205,7 @@ def bench(parts_dir: Path, work: Path, names, timeout: float) -> dict:
     spec = importlib.util.spec_from_file_location("make_parts", MAKE_PARTS)
     make_parts = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make_parts)
+    load = os.getloadavg()[0]
     begin = time.perf_counter()
     make_parts.make_parts(parts_dir, names)
     generation = time.perf_counter() - begin
@@ -229,7 +230,7 @@ def bench(parts_dir: Path, work: Path, names, timeout: float) -> dict:
               flush=True)
     return {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "commit": commit,
             "machine": platform.node(),
-            "cpus": os.cpu_count(), "timeout": timeout, "runs_per_case": 1, "generation_seconds": generation,
+            "cpus": os.cpu_count(), "load_average": [load, os.getloadavg()[0]], "timeout": timeout, "runs_per_case": 1, "generation_seconds": generation,
             "rows": rows}
 
 
@@ -241,7 +242,7 @@ def _cell(result: dict, key: str, scale: float = 1.0, digits: int = 1) -> str:
 def markdown(results: dict) -> str:
     """The results as a page: a summary, then one table per mesher run."""
     rows = results["rows"]
-    titles = {"default": "fuzzymesh, default job (base pattern, size = diagonal / 40)",
+    titles = {"default": "fuzzymesh, default job (no recipe, size = diagonal / 40)",
               "static-stress": "fuzzymesh, `recipe: static-stress`",
               "gmsh": "Gmsh 3-D Delaunay from the STL (classifySurfaces 40 deg + createGeometry, MeshSizeMax = "
                       "diagonal / 40)"}
@@ -253,6 +254,9 @@ def markdown(results: dict) -> str:
              f"timeout {results['timeout']:g} s per run. Made by `python bench/parts.py`.", "",
              f"Meshed: fuzzymesh default {ok['default']}/{len(rows)}, fuzzymesh static-stress "
              f"{ok['static-stress']}/{len(rows)}, Gmsh {ok['gmsh']}/{len(rows)}.", "",
+             *([f"One-minute load average at the start and the end: {results['load_average'][0]:.1f}, "
+                f"{results['load_average'][1]:.1f} (above the core count, the times include waiting).", ""]
+               if "load_average" in results else []),
              "Every mesh is measured by this script, the same way for both meshers: tets, minimum dihedral angle "
              "(degrees), volume error against the STL's volume and the exact CAD volume (%), two-sided Hausdorff "
              "distance between the mesh boundary and the STL (sampled, in units of the size H). Wall: the whole "
