@@ -20,11 +20,13 @@ from .schema import INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, pos
 from .yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
-ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap")
+ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap", "curvature")
 LAWS = ("constant", "linear", "geometric", "power")
-SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap", "wall_thickness", "gap_width")
+SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap", "wall_thickness", "gap_width",
+          "curvature_radius")
 DOMINANCE = ("membership", "tie")
-LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width"}   # anchors on the local size, their L
+# anchors on classes of surface pieces of like measure (engine/thickness.py, engine/curvature.py), and their L
+LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width", "curvature": "curvature_radius"}
 FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "named"),
                  "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
 COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
@@ -318,8 +320,8 @@ def load_pattern(raw: Located, source: str) -> Pattern:
     if (local_scale or spec["scale"] in LOCAL_SCALES.values()) and spec["scale"] != local_scale:
         raise _err(f"anchor '{spec['anchor']}' and scale '{spec['scale']}' do not go together",
                    raw.where("scale") if "scale" in raw else raw.where("anchor"),
-                   "anchor thin-wall takes scale wall_thickness, narrow-gap takes gap_width, and those scales "
-                   "no other anchor")
+                   ", ".join(f"anchor {a} takes scale {s}" for a, s in LOCAL_SCALES.items())
+                   + ", and those scales no other anchor")
     pattern = Pattern(spec["name"], spec["doc"], spec["anchor"], spec["accepts"], spec["scale"], params, roles,
                       [], source, spec["dominance"])
     names = pattern.expression_names()
@@ -587,7 +589,7 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
         raise _err(f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}", placement.source,
                    "give them under 'parameters:'")
     anchor_key = {"point": ("point", "at"), "curve": ("at", "every"), "surface": ("at", "every"),
-                  "region": ("region",), "domain": (), "thin-wall": (), "narrow-gap": ()}[pattern.anchor]
+                  "region": ("region",), "domain": (), **{local: () for local in LOCAL_SCALES}}[pattern.anchor]
     given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
     if pattern.anchor == "domain" and given:
         raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'",

@@ -26,6 +26,7 @@ from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_dist
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
 from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement
+from .curvature import curvature
 from .thickness import local_size
 
 log = logging.getLogger(__name__)
@@ -367,7 +368,9 @@ def _anchors(pattern, placement, features, geometry):
         region = RegionDistance(placement.region, placement.source)
         return [(None, lambda spacing: region)]
     if pattern.anchor in LOCAL_SCALES:
-        return [(part, part.distance) for part in local_size(geometry).parts(pattern.anchor)]
+        parts = curvature(geometry, features.feature_angle).parts() if pattern.anchor == "curvature" \
+            else local_size(geometry).parts(pattern.anchor)
+        return [(part, part.distance) for part in parts]
     if pattern.anchor == "point":
         if placement.point is not None:
             point = np.asarray(placement.point, dtype=float)

@@ -32,6 +32,7 @@ TENSION = 100.0                          # MPa on the end faces
 PLATE = dict(length=200.0, width=100.0, thickness=10.0, hole_radius=10.0)
 HOLE_NEAR, HOLE_FAR = 0.125, 1.0        # the hole pattern's defaults (times the radius)
 THROUGH = 2.0                           # the thin-wall pattern's default: elements through the plate
+PER_CIRCLE = 24.0                       # the curvature pattern's default: elements around the hole
 STUDY_SIZING = Path(__file__).with_name("study-sizing.yaml")   # the shipped sizing without always-placed rules
 THICKNESS_SAMPLES = 201                 # points along each root line for the through-thickness mean
 
@@ -47,30 +48,33 @@ def default_size() -> float:
     return float(np.linalg.norm([PLATE["length"], PLATE["width"], PLATE["thickness"]])) / SIZE_FROM_SCALE
 
 
-def thin_wall(scale: float) -> dict:
-    """The always-placed thin-wall pattern with its size (thickness / through) times ``scale``."""
-    return {"pattern": "thin-wall", "parameters": {"through": THROUGH / scale}}
+def always_placed(scale: float) -> list[dict]:
+    """The always-placed thin-wall and curvature patterns with their sizes (thickness / through, 2 pi r /
+    per_circle) times ``scale``."""
+    return [{"pattern": "thin-wall", "parameters": {"through": THROUGH / scale}},
+            {"pattern": "curvature", "parameters": {"per_circle": PER_CIRCLE / scale}}]
 
 
 def graded_placements(scale: float, rules: bool = True) -> list[dict]:
     """The static-stress recipe's placements on the plate (its re-entrant-edge pattern finds no edge there)
-    with the hole pattern's near and far sizes times ``scale``, and with ``rules`` the thin-wall pattern's too."""
+    with the hole pattern's near and far sizes times ``scale``, and with ``rules`` the thin-wall and curvature
+    patterns' too."""
     return [{"pattern": "uniform-domain"},
             {"pattern": "hole", "every": "hole", "parameters": {"near": HOLE_NEAR * scale, "far": HOLE_FAR * scale}},
-            *([thin_wall(scale)] if rules else [])]
+            *(always_placed(scale) if rules else [])]
 
 
 def job(scale: float = 1.0, graded: bool = True, seed: int = 0, rules: bool = True) -> dict:
     """The plate's job. Graded: the static-stress recipe (scale 1), else its placements with every size times
     ``scale`` (the global size too). Uniform: the base pattern at ``scale`` x the default size, with the thin-wall
-    pattern's size times ``scale`` (the plate is thin everywhere: 2 / scale elements through it). Without
-    ``rules`` (the convergence study: the hole pattern against a uniform size, down to 0.4 elements through the
-    plate) the job reads ``STUDY_SIZING``: no always-placed thin-wall and narrow-gap patterns."""
+    and curvature patterns' sizes times ``scale`` (the plate is thin everywhere: 2 / scale elements through it;
+    24 / scale around the hole). Without ``rules`` (the convergence study: the hole pattern against a uniform
+    size, down to 0.4 elements through the plate) the job reads ``STUDY_SIZING``: no always-placed patterns."""
     data = {"geometry": {"shape": "plate_with_hole", "parameters": dict(PLATE)}, "seed": seed,
             **({} if rules else {"knowledge": [str(STUDY_SIZING)]})}
     if graded and scale == 1.0:
         return {**data, "recipe": "static-stress"}
-    uniform = [{"pattern": "uniform-domain"}, *([thin_wall(scale)] if rules else [])]
+    uniform = [{"pattern": "uniform-domain"}, *(always_placed(scale) if rules else [])]
     return {**data, "size": scale * default_size(), "place": graded_placements(scale, rules) if graded else uniform}
 
 

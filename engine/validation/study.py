@@ -2,8 +2,8 @@
 
 Two series of meshes of the same plate: *graded* is the static-stress recipe with every target size
 times a scale s (s = 1 is the recipe's default mesh), *uniform* is the base pattern alone at global size
-s x the default size. Both read the sizing defaults without the always-placed thin-wall and narrow-gap
-rules (``plate_hole.STUDY_SIZING``): the study compares the hole pattern with a uniform size, down to
+s x the default size. Both read the sizing defaults without the always-placed thin-wall, narrow-gap and
+curvature rules (``plate_hole.STUDY_SIZING``): the study compares the hole pattern with a uniform size, down to
 0.4 elements through the plate, as it was designed and published. Each scale is meshed with several
 seeds (coarse meshes scatter by a few percent from seed to seed) and solved
 (``plate_hole.solve_plate``); its Kt is compared with Peterson's. Per scale, the means over the seeds of

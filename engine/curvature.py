@@ -1,0 +1,142 @@
+"""Radius of curvature of a solid's surface, per input face: the anchors of ``curvature`` patterns.
+
+Normals at the vertices are the means of the face normals around them with Max's weights (exact on a
+sphere), taken per smooth fan: faces that meet across an edge with a dihedral angle above the feature angle
+(a crease, not curvature) do not share a vertex normal, so a cylinder's rim vertex has the cylinder's normal
+on the cylinder's side and the end face's on the other. Each face's shape operator (2 x 2 in its plane) is
+fitted by least squares to the change of those normals along its three edges (Rusinkiewicz 2004): exact on
+a faceted cylinder (1 / r across the facets, 0 along them). Then smoothed: per fan, the mean of its faces'
+operators (each turned into the fan's normal frame) weighted by area x shape quality; per face, the mean of
+its three fans' (turned back), weighted by the fans' weights. So a sliver's ill-conditioned fit (0.06 mm
+across, 15 mm long) counts for little, and a fan of slivers only for as little.
+
+A face's radius is 1 / the largest |principal curvature| of its smoothed operator: the smaller principal
+radius, concave (a hole, a fillet) or convex alike; planar faces, and faces curving less than ``PLANAR`` x
+the model size, have none (inf). A planar face along a tangent fillet takes some of the fillet's curvature
+(about twice its radius). One radius per face: along a cone's long facets it is the facet's, not its tip's.
+Measured once per geometry and feature angle (:func:`curvature`); the faces are grouped in classes of like
+radius by :func:`engine.thickness.classes`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from scipy import sparse
+from scipy.sparse import csgraph
+
+from .thickness import LocalPart, classes
+
+PLANAR = 10.0     # radii above this, times the model size, are planar (inf)
+
+
+@dataclass
+class Curvature:
+    """The smaller principal radius of curvature of each input face (inf where planar)."""
+
+    triangles: np.ndarray     # (m, 3, 3) the input faces
+    radius: np.ndarray        # (m,)
+    seconds: float
+
+    def parts(self) -> list[LocalPart]:
+        """The curved faces in classes of like radius, most curved first (ids ``radius-R``)."""
+        return classes(self.triangles, self.radius, "radius")
+
+
+def curvature(geometry, feature_angle: float) -> Curvature:
+    """The geometry's radius of curvature, measured on the first call per feature angle and kept with it."""
+    cache = geometry.__dict__.setdefault("_curvature", {})
+    if feature_angle not in cache:
+        cache[feature_angle] = measure(geometry.mesh, feature_angle)
+    return cache[feature_angle]
+
+
+def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:
+    """Radius of curvature per face of the closed, outward-oriented surface ``mesh``; edges with a dihedral
+    angle above ``feature_angle`` (degrees) are creases."""
+    start = time.perf_counter()
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
+    scale = float(np.linalg.norm(np.ptp(V, axis=0)))
+    T = V[F]
+    edges = np.roll(T, -1, axis=1) - T                                # edges[:, i] = p[i + 1] - p[i]
+    cross = np.cross(edges[:, 0], edges[:, 1])
+    area = np.linalg.norm(cross, axis=1) / 2
+    good = area > 1e-12 * scale ** 2
+    normal = cross / np.where(good, 2 * area, 1.0)[:, None]
+    fan, fans = _fans(mesh, feature_angle)                            # fan of each corner (3 f + i)
+    fan_normal = _fan_normals(fan, fans, edges, normal)
+    corner_normal = fan_normal[fan].reshape(-1, 3, 3)
+    t1 = edges[:, 0] / np.maximum(np.linalg.norm(edges[:, 0], axis=1), 1e-300)[:, None]
+    frame = np.stack([t1, np.cross(normal, t1)], axis=2)              # (m, 3, 2): the face's plane
+    own = np.zeros((len(F), 2, 2))
+    own[good] = _fit(edges[good] @ frame[good], (np.roll(corner_normal, -1, axis=1) - corner_normal)[good]
+                     @ frame[good])
+    face = np.repeat(np.arange(len(F)), 3)
+    turn = _rotations(normal[face], fan_normal[fan])                  # per corner: face frame -> fan frame
+    quality = 4 * np.sqrt(3) * area / np.maximum(np.einsum("fij,fij->f", edges, edges), 1e-300)   # 1: equilateral
+    weight = np.repeat(np.where(good, area * quality, 0.0), 3)
+    gather = sparse.csr_matrix((np.ones(len(fan)), (fan, np.arange(len(fan)))), shape=(fans, len(fan)))
+    fan_weight = gather @ weight
+    turned = weight[:, None, None] * (turn @ (frame @ own @ frame.transpose(0, 2, 1))[face] @ turn.transpose(0, 2, 1))
+    fan_operator = (gather @ turned.reshape(-1, 9)).reshape(-1, 3, 3) / np.maximum(fan_weight, 1e-300)[:, None, None]
+    corner_weight = fan_weight[fan].reshape(-1, 3, 1, 1)
+    back = (turn.transpose(0, 2, 1) @ fan_operator[fan] @ turn).reshape(-1, 3, 3, 3)
+    smooth = (back * corner_weight).sum(axis=1) / np.maximum(corner_weight.sum(axis=1), 1e-300)
+    with np.errstate(divide="ignore"):
+        radius = np.where(good, 1.0 / _largest(frame.transpose(0, 2, 1) @ smooth @ frame), np.inf)
+    radius[radius > PLANAR * scale] = np.inf
+    return Curvature(T, radius, time.perf_counter() - start)
+
+
+def _fans(mesh: trimesh.Trimesh, feature_angle: float):
+    """Label of every face corner (3 f + i): corners of one vertex joined across edges that are not creases."""
+    F = mesh.faces
+    smooth = mesh.face_adjacency_angles <= np.radians(feature_angle)
+    a, b = mesh.face_adjacency[smooth].T
+    shared = mesh.face_adjacency_edges[smooth]
+    corner = lambda f, v: 3 * f + np.argmax(F[f] == v[:, None], axis=1)
+    rows = np.concatenate([corner(a, shared[:, 0]), corner(a, shared[:, 1])])
+    cols = np.concatenate([corner(b, shared[:, 0]), corner(b, shared[:, 1])])
+    n = 3 * len(F)
+    fans, fan = csgraph.connected_components(sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
+                                             directed=False)
+    return fan, fans
+
+
+def _fan_normals(fan, fans, edges, normal):
+    """Mean face normal of each fan with Max's weights (sin of the corner's angle over its two edges' lengths:
+    exact at the vertices of triangles inscribed in a sphere), unit length."""
+    before = -np.roll(edges, 1, axis=1)                               # from corner i to p[i - 1]
+    weight = (np.linalg.norm(np.cross(edges, before), axis=2)
+              / np.maximum(np.einsum("fij,fij->fi", edges, edges) * np.einsum("fij,fij->fi", before, before),
+                           1e-300)).ravel()
+    total = np.stack([np.bincount(fan, weight * np.repeat(normal[:, j], 3), minlength=fans) for j in range(3)], 1)
+    return total / np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
+
+
+def _fit(edges: np.ndarray, change: np.ndarray) -> np.ndarray:
+    """Symmetric S (m, 2, 2) with S e = dn in least squares over the three edges e (m, 3, 2) and normal
+    changes dn (m, 3, 2): unknowns (S00, S01, S11)."""
+    eu, ev = edges[..., 0], edges[..., 1]
+    A = np.zeros((len(edges), 6, 3))
+    A[:, :3, 0], A[:, :3, 1], A[:, 3:, 1], A[:, 3:, 2] = eu, ev, eu, ev
+    y = np.concatenate([change[..., 0], change[..., 1]], axis=1)
+    s = np.linalg.solve(A.transpose(0, 2, 1) @ A, (A.transpose(0, 2, 1) @ y[..., None]))[..., 0]
+    return np.stack([s[:, [0, 1]], s[:, [1, 2]]], axis=1)
+
+
+def _rotations(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotations (m, 3, 3) taking unit vectors a to b (Rodrigues)."""
+    v = np.cross(a, b)
+    K = np.zeros((len(a), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K -= K.transpose(0, 2, 1)
+    return np.eye(3) + K + K @ K / np.maximum(1.0 + np.einsum("ij,ij->i", a, b), 1e-12)[:, None, None]
+
+
+def _largest(operator: np.ndarray) -> np.ndarray:
+    """The largest |eigenvalue| of symmetric 2 x 2 matrices: the largest principal curvature."""
+    mean = (operator[:, 0, 0] + operator[:, 1, 1]) / 2
+    return np.abs(mean) + np.hypot((operator[:, 0, 0] - operator[:, 1, 1]) / 2, operator[:, 0, 1])
