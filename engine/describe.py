@@ -61,7 +61,8 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
 
 def feature_records(features: Features) -> dict:
     """Every corner, curve and patch: id, names, kinds, size (curve length and circle radius, patch area
-    and cylinder radius), centroid and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
+    and cylinder radius), whether a curve is sharp (a smooth cut is one that charts a surface), centroid
+    and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
     out = {}
     for kind, plural in TYPES:
         records = []
@@ -70,7 +71,7 @@ def feature_records(features: Features) -> dict:
             record = {"id": feature.id, "names": list(feature.names), "kinds": list(getattr(feature, "kinds", []))}
             if kind == "curve":
                 record.update(length=feature.length, radius=feature.circle.radius if feature.circle else None,
-                              closed=feature.closed)
+                              closed=feature.closed, sharp=feature.sharp)
             if kind == "patch":
                 record.update(area=feature.area, radius=feature.cylinder.radius if feature.cylinder else None)
             record.update(centroid=centroid(feature).tolist(), bounds=[points.min(axis=0).tolist(),
@@ -91,7 +92,8 @@ def feature_table(records: dict, scale: float) -> str:
                     else "") + (f", r {_number(r['radius'])}" if r.get("radius") is not None else "")
             low, high = r["bounds"]
             box = "-" if low == high else f"[{_coordinates(low, scale)}] .. [{_coordinates(high, scale)}]"
-            rows.append((r["id"], ", ".join(r["names"]) or "-", ", ".join(r["kinds"]) or "-", size or "-",
+            kinds = r["kinds"] + (["(smooth cut)"] if r.get("sharp") is False else [])
+            rows.append((r["id"], ", ".join(r["names"]) or "-", ", ".join(kinds) or "-", size or "-",
                          _coordinates(r["centroid"], scale), box))
     widths = [max(len(row[k]) for row in rows) for k in range(len(header))]
     return "\n".join("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows)

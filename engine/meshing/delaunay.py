@@ -66,7 +66,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         moves += more
         slid = np.flatnonzero(np.any(points != unslid, axis=1) & ~np.isnan(slide[1][:, 0]) & (slide[1] != 0).any(axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
-    tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR)
+    tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR,
+                                                          removable=np.nan_to_num(slide[1]).any(axis=1))
     seconds["improve"] = time.perf_counter() - start
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)

@@ -125,15 +125,19 @@ def quality_below(points, tets, quality: float) -> np.ndarray:
     return _below_quality(np.ascontiguousarray(points, dtype=np.float64), tets, np.arange(len(tets)), quality)
 
 
-def peel_boundary_slivers(points, tets, boundary, patch, quality: float):
-    """Remove the tets below ``quality`` that lie flat between two boundary faces of one patch.
+def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removable=None):
+    """Remove the tets below ``quality`` that lie flat between two boundary faces of one patch (or of
+    two, across an edge of ``removable`` nodes: a smooth cut's), and those that lie flat under three
+    boundary faces around a ``removable`` node.
 
-    Such a tet fills the fold between two surface triangles that share an edge; its two
+    The first fills the fold between two surface triangles that share an edge; its two
     other faces become boundary instead (a surface edge flip across a flat tet, so the
     surface moves by less than the tet's thickness and every node stays on the boundary).
     A removal that would make an edge non-manifold (the flipped edge already on the
-    boundary) is skipped. Returns (tets, boundary, patch, removed count); the number of
-    bad tets is small, so they are taken one by one.
+    boundary) is skipped. The second is the whole star of a surface node (three
+    consecutive nodes of a smooth cut and a patch node beside them): its fourth face
+    becomes boundary and the node leaves the mesh. Returns (tets, boundary, patch,
+    removed count); the number of bad tets is small, so they are taken one by one.
     """
     bad = np.flatnonzero(quality_below(points, tets, quality))
     if not len(bad):
@@ -144,14 +148,30 @@ def peel_boundary_slivers(points, tets, boundary, patch, quality: float):
         for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
             edges[(min(a, b), max(a, b))] = edges.get((min(a, b), max(a, b)), 0) + 1
     drop, gone, added, added_patch = [], set(), [], []
+    degree = np.bincount(boundary.ravel(), minlength=len(points))
     for t in bad:
         own = tets[t][FACES]                              # outward faces of the tet
         on_boundary = [faces.get(tuple(sorted(f))) for f in own.tolist()]
         hits = [k for k in on_boundary if k is not None]
-        if len(hits) != 2 or max(hits) >= len(boundary) or patch[hits[0]] != patch[hits[1]]:
+        if len(hits) == 3 and removable is not None and max(hits) < len(boundary) and not gone & set(hits):
+            opposite = [k is None for k in on_boundary].index(True)
+            apex = tets[t][opposite]                      # the node all three boundary faces share
+            if removable[apex] and degree[apex] == 3:
+                drop.append(t)
+                gone.update(hits)
+                degree[apex] = 0
+                face = own[opposite][::-1]
+                faces[tuple(sorted(face.tolist()))] = len(boundary) + len(added)
+                added.append(face)
+                added_patch.append(np.bincount(patch[hits]).argmax())
+            continue
+        if len(hits) != 2 or max(hits) >= len(boundary):
             continue                                      # (faces made boundary here are left alone)
         inner = own[[k is None for k in on_boundary]]     # the two faces that become boundary
         shared = set(boundary[hits[0]].tolist()) & set(boundary[hits[1]].tolist())
+        across_cut = removable is not None and all(removable[v] for v in shared)   # a smooth cut's edge
+        if patch[hits[0]] != patch[hits[1]] and not across_cut:
+            continue
         flipped = tuple(sorted(set(tets[t].tolist()) - shared))
         if len(shared) != 2 or edges.get(flipped, 0):
             continue
