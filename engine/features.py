@@ -17,6 +17,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
+from .errors import GeometryError
 from .geometry import Geometry
 
 CIRCLE_TOLERANCE = 2e-3  # max radial deviation / radius for a curve to count as a circle
@@ -158,7 +159,7 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
     pieces = [piece for patch in patches if not patch.planar and patch.cylinder is None
-              for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp)]
+              for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp, geometry.source)]
     if pieces:
         for k, piece in enumerate(pieces, start=group.max() + 1):
             group[piece] = k
@@ -200,14 +201,16 @@ SEED_BAND = 0.25     # a halved piece's faces in this top and bottom share of th
 SMOOTHING = 4        # rounds of neighbour averaging of the normals' spread before the seeds are chosen
 
 
-def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray) -> list[np.ndarray]:
+def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray,
+                 source: str) -> list[np.ndarray]:
     """The charts a smooth patch (``faces``) is cut into; one piece when it can be flattened whole.
 
     First its planar regions (coplanar faces, wide against the facets they bend
     into: :func:`_wide`); then each connected rest is one
     piece if it lies on a cylinder or can be flattened (:func:`flattenable`),
     else it is halved across its widest spread of normals until every piece can.
-    ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges.
+    ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges. A piece still
+    neither after MAX_SPLITS halvings is refused (GeometryError naming ``source``), before any packing.
     """
     adjacency = mesh.face_adjacency
     pairs = adjacency[smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]])]
@@ -225,7 +228,7 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     keep = rest[pairs[:, 0]] & rest[pairs[:, 1]]
     labels = _components(n, pairs[keep])
     for r in np.unique(labels[rest]):
-        pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep])
+        pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep], source)
     return pieces
 
 
@@ -256,7 +259,7 @@ def _components(n: int, pairs: np.ndarray) -> np.ndarray:
     return csgraph.connected_components(graph, directed=False)[1]
 
 
-def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
+def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -> list[np.ndarray]:
     """``faces`` (connected) as pieces that lie on a cylinder or can be flattened.
 
     A piece that is neither is halved: its faces whose normals lie in the
@@ -274,10 +277,15 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray) -> list[np.nda
     while todo:
         piece, depth = todo.pop()
         verts = mesh.vertices[np.unique(mesh.faces[piece])]
-        if depth >= MAX_SPLITS or len(piece) < 2 or flattenable(mesh, piece) or \
-                fit_cylinder(centres[piece], normals[piece], verts) is not None:
+        if len(piece) < 2 or flattenable(mesh, piece) or fit_cylinder(centres[piece], normals[piece], verts) is not None:
             pieces.append(piece)
             continue
+        if depth >= MAX_SPLITS:
+            centre = (centres[piece] * mesh.area_faces[piece, None]).sum(axis=0) / mesh.area_faces[piece].sum()
+            raise GeometryError(f"a smooth surface around ({', '.join(f'{x:.4g}' for x in centre)}) cannot be cut "
+                                f"into pieces that flatten ({len(piece)} faces left after {MAX_SPLITS} halvings)",
+                                where=source, fix="lower geometry.feature_angle so that feature curves cut it, or "
+                                                  "re-export the surface with less noise")
         spread = normals[piece] - normals[piece].mean(axis=0)
         along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
         local = np.full(len(mesh.faces), -1)
