@@ -234,23 +234,21 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
 
 def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     """Per region label: whether that coplanar region is a face of its own, not one facet strip of a curved
-    surface: it has a face none of whose edges bends, or it is wider (its area over the length of its
-    bending border) than WIDE x the faces it bends into (their height over the shared edge). A CAD
-    tessellation's flat wall of two triangles beside a fillet is wide; a cylinder's strip is not."""
+    surface: it is wider (its area over the length of its bending border) than WIDE x the faces it bends
+    into (their height over the shared edge); a region that bends nowhere is. A CAD tessellation's flat
+    wall of two triangles beside a fillet is wide; a cylinder's strip or two coplanar facets at a
+    sphere's corner are not."""
     count = int(region.max()) + 1
     ends = mesh.vertices[_shared_edges(mesh, bent)]
     length = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1)
     area = mesh.area_faces
-    bends = np.zeros(len(region), bool)
-    bends[bent.ravel()] = True
-    flat_face = np.bincount(region[~bends], minlength=count) > 0
     side, other = bent.ravel(), bent[:, ::-1].ravel()
     length = np.repeat(length, 2)              # per (face, face it bends into) of side, other
     border = np.bincount(region[side], weights=length, minlength=count)
     height = 2 * area[other] / np.maximum(length, 1e-300)
     beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
     width = np.bincount(region, weights=area, minlength=count) / np.maximum(border, 1e-300)
-    return flat_face | (width > WIDE * beyond)
+    return width > WIDE * beyond
 
 
 def _components(n: int, pairs: np.ndarray) -> np.ndarray:
