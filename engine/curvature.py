@@ -19,7 +19,6 @@ radius by :func:`engine.thickness.classes`.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +37,6 @@ class Curvature:
 
     triangles: np.ndarray     # (m, 3, 3) the input faces
     radius: np.ndarray        # (m,)
-    seconds: float
 
     def parts(self) -> list[LocalPart]:
         """The curved faces in classes of like radius, most curved first (ids ``radius-R``)."""
@@ -56,7 +54,6 @@ def curvature(geometry, feature_angle: float) -> Curvature:
 def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:
     """Radius of curvature per face of the closed, outward-oriented surface ``mesh``; edges with a dihedral
     angle above ``feature_angle`` (degrees) are creases."""
-    start = time.perf_counter()
     V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
     scale = float(np.linalg.norm(np.ptp(V, axis=0)))
     T = V[F]
@@ -87,7 +84,7 @@ def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:
     with np.errstate(divide="ignore"):
         radius = np.where(good, 1.0 / _largest(frame.transpose(0, 2, 1) @ smooth @ frame), np.inf)
     radius[radius > PLANAR * scale] = np.inf
-    return Curvature(T, radius, time.perf_counter() - start)
+    return Curvature(T, radius)
 
 
 def _fans(mesh: trimesh.Trimesh, feature_angle: float):

@@ -136,6 +136,14 @@ def test_always_placed_with_a_tie_and_off_where_the_radius_needs_no_more_than_h(
     assert "curvature" not in [p.pattern for p in sizing.placed], "2 pi 30 / per_circle is above H = 2.1"
 
 
+def test_patterns_show_and_lint(capsys):
+    assert main(["patterns", "show", "curvature"]) == 0
+    text = capsys.readouterr().out
+    assert "anchor: curvature" in text and "L (scale): curvature_radius" in text
+    assert "per_circle (default 24)" in text and "active if H - 6.283185 * L / per_circle > 0" in text
+    assert main(["lint"]) == 0
+
+
 def test_explain_and_the_element_guard_on_the_junction():
     job = default_job()                                       # the cylinder (r 25, axis x = 60) at H = 8
     geometry, features = build_geometry(job)
