@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from ..mesh import STEINER, TetMesh
+from ..mesh import STEINER, TetMesh, signed_volumes
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
 from .improve import FLOOR, TARGET, gmsh_optimize, min_dihedrals, peel_boundary_slivers, quality_below, relocate
@@ -25,6 +25,8 @@ from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
 log = logging.getLogger(__name__)
+
+RESTORE_ROUNDS = 4   # rounds of putting back slid nodes whose tets turned non-positive
 
 
 @register_mesher("delaunay")
@@ -66,6 +68,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         moves += more
         slid = np.flatnonzero(np.any(points != unslid, axis=1) & ~np.isnan(slide[1][:, 0]) & (slide[1] != 0).any(axis=1))
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
+        points = _positive(points, unslid, tets, np.flatnonzero(np.any(points != unslid, axis=1)))
     tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR,
                                                           removable=np.nan_to_num(slide[1]).any(axis=1))
     seconds["improve"] = time.perf_counter() - start
@@ -102,6 +105,18 @@ def _slide_directions(points, level, entity, geometry, features):
     every[sliding] = geometry.mesh.face_normals[face]
     slide[on_patch[planar]] = every[on_patch[planar]]
     return slide, every
+
+
+def _positive(points, before, tets, moved) -> np.ndarray:
+    """``points`` with the ``moved`` nodes of every tet that is not positive put back where ``before`` has
+    them (all positive there): a node slid and put back onto a curved surface can fold a flat tet, and
+    the pass's other moves around it were made for the node off the surface."""
+    for _ in range(RESTORE_ROUNDS):
+        back = np.intersect1d(tets[signed_volumes(points, tets) <= 0], moved)
+        if len(back) == 0:
+            break
+        points[back] = before[back]
+    return points
 
 
 def _worst(points, tets) -> float:
