@@ -255,7 +255,9 @@ def markdown(results: dict) -> str:
              f"Meshed: fuzzymesh default {ok['default']}/{len(rows)}, fuzzymesh static-stress "
              f"{ok['static-stress']}/{len(rows)}, Gmsh {ok['gmsh']}/{len(rows)}.", "",
              *([f"One-minute load average at the start and the end: {results['load_average'][0]:.1f}, "
-                f"{results['load_average'][1]:.1f} (above the core count, the times include waiting).", ""]
+                f"{results['load_average'][1]:.1f} on {results['cpus']} cores"
+                + (" (above the core count: the times include waiting)." if max(results['load_average']) > results['cpus']
+                   else "."), ""]
                if "load_average" in results else []),
              "Every mesh is measured by this script, the same way for both meshers: tets, minimum dihedral angle "
              "(degrees), volume error against the STL's volume and the exact CAD volume (%), two-sided Hausdorff "
