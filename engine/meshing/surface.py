@@ -26,6 +26,8 @@ from ..features import conformal_map
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delaunay is local)
+SEAM_TRIES = 4    # seams tried on a full cylinder, each SEAM_SHIFT of a turn on from the last
+SEAM_SHIFT = 0.381966
 CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is left out, ...
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
 HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
@@ -250,6 +252,30 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
 
 
 def _triangulate_chart(chart, uv, radius, constraints, droppable):
+    """(triangles, crowded nodes, lost constrained edges) of one chart. A periodic strip whose two copies
+    of the seam band triangulate a nearly co-circular set differently (roundoff decides) leaves triangles
+    that pair with no neighbour: then the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
+    if chart.turn is None:
+        return _triangulate_strip(chart, uv, radius, constraints, droppable)
+    for attempt in range(SEAM_TRIES):
+        turned = uv.copy()
+        turned[:, 0] = np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
+        tri, crowded, lost = _triangulate_strip(chart, turned, radius, constraints, droppable)
+        if len(lost) or _paired(tri, constraints):
+            break
+    return tri, crowded, lost
+
+
+def _paired(tri, constraints) -> bool:
+    """Whether every directed edge of ``tri`` has its twin in ``tri`` or is a constrained (border) edge."""
+    n = int(max(tri.max(initial=0), constraints.max(initial=0))) + 1
+    half = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = half[:, 0] * n + half[:, 1]
+    lone = ~np.isin(half[:, 1] * n + half[:, 0], key)
+    return bool(np.isin(key[lone], constraints[:, 0] * n + constraints[:, 1]).all())
+
+
+def _triangulate_strip(chart, uv, radius, constraints, droppable):
     original = np.arange(len(uv))
     copies = chart.copies(uv, radius)
     extended = np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])

@@ -52,7 +52,6 @@ KNOWN = {
     ("fillet_block", "coarse", "static-stress"): "mesh -> input 0.15 h across corner blends",
     ("filleted_hole_floor", "fine", None): "mesh -> input 0.13 h on the fillets",
     ("filleted_hole_floor", "coarse", "static-stress"): "mesh -> input 0.13 h on the fillets",
-    ("flange", "coarse", None): "internal error: boundary triangulation not closed (a full cylinder's seam)",
     ("hex_nut", "coarse", None): "mesh -> input 0.10 h",
     ("hex_nut", "fine", None): "mesh -> input 0.14 h",
     ("hex_nut", "coarse", "static-stress"): "mesh -> input 0.10 h",
