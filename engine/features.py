@@ -376,12 +376,6 @@ def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | N
     return uv / np.median(scale)
 
 
-def euler_characteristic(triangles: np.ndarray) -> int:
-    """V - E + F of a triangle set (1 for a disk, 0 for an annulus or a tube, 2 for a sphere)."""
-    edges = np.unique(np.sort(triangles[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
-    return len(np.unique(triangles)) - len(edges) + len(triangles)
-
-
 def _half(mesh, faces: np.ndarray) -> np.ndarray:
     """The faces of ``faces`` on one side of the plane through their centroid across their longest extent."""
     centres = mesh.triangles_center[faces]

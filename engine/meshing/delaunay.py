@@ -61,16 +61,18 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     fixed = (level != VOLUME) & (level != STEINER)
     points, tets = gmsh_optimize(points, tets, fixed)
     slide = _slide_directions(points, level, entity, geometry, features)
+    surface_node = np.nan_to_num(slide[1]).any(axis=1)   # patch and smooth-cut nodes: they slide on the surface
     points, moves = relocate(points, tets, slide[0], seed)
     if (quality_below(points, tets, TARGET)).any():   # last pass: curved-patch nodes slide too
         unslid = points
         points, more = relocate(points, tets, slide[1], seed)
         moves += more
-        slid = np.flatnonzero(np.any(points != unslid, axis=1) & ~np.isnan(slide[1][:, 0]) & (slide[1] != 0).any(axis=1))
+        moved = np.any(points != unslid, axis=1)
+        slid = np.flatnonzero(moved & surface_node)
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
-        points = _positive(points, unslid, tets, np.flatnonzero(np.any(points != unslid, axis=1)))
+        points = _positive(points, unslid, tets, np.flatnonzero(moved))
     tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR,
-                                                          removable=np.nan_to_num(slide[1]).any(axis=1))
+                                                          removable=surface_node)
     seconds["improve"] = time.perf_counter() - start
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
@@ -91,8 +93,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
 
 def _slide_directions(points, level, entity, geometry, features):
     """Per node: NaN (fixed), 0 (free: volume and Steiner nodes) or the normal of the plane a surface node
-    slides in; (planar patches only, every patch and smooth cut: curved ones and the nodes of a cut through a
-    smooth surface in the plane of the input face the node is on)."""
+    slides in; two arrays: (nodes of planar patches only; nodes of every patch and of every smooth cut, a
+    curved one's in the plane of the input face the node is on)."""
     slide = np.full((len(level), 3), np.nan)
     slide[(level == VOLUME) | (level == STEINER)] = 0.0
     on_patch = np.flatnonzero(level == PATCH)

@@ -159,14 +159,15 @@ def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removab
             if removable[apex] and degree[apex] == 3:
                 drop.append(t)
                 gone.update(hits)
-                degree[apex] = 0
                 face = own[opposite][::-1]
+                np.subtract.at(degree, boundary[hits].ravel(), 1)
+                np.add.at(degree, face, 1)
                 faces[tuple(sorted(face.tolist()))] = len(boundary) + len(added)
                 added.append(face)
                 added_patch.append(np.bincount(patch[hits]).argmax())
             continue
-        if len(hits) != 2 or max(hits) >= len(boundary):
-            continue                                      # (faces made boundary here are left alone)
+        if len(hits) != 2 or max(hits) >= len(boundary) or gone & set(hits):
+            continue                                      # (faces made boundary or gone here are left alone)
         inner = own[[k is None for k in on_boundary]]     # the two faces that become boundary
         shared = set(boundary[hits[0]].tolist()) & set(boundary[hits[1]].tolist())
         across_cut = removable is not None and all(removable[v] for v in shared)   # a smooth cut's edge
@@ -179,6 +180,8 @@ def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removab
         gone.update(hits)
         edges[flipped] = 2
         edges[tuple(sorted(shared))] = 0
+        np.subtract.at(degree, boundary[hits].ravel(), 1)
+        np.add.at(degree, inner.ravel(), 1)
         for f in inner[:, ::-1]:                          # reversed: outward for the remaining mesh
             faces[tuple(sorted(f.tolist()))] = len(boundary) + len(added)
             added.append(f)
