@@ -1,7 +1,8 @@
 """The ``fuzzymesh`` command line: a thin shell over :mod:`engine`.
 
-Every user error is printed as one line ``fuzzymesh: error: ...`` with exit
-code 2 (1 for lint findings); no traceback unless ``--debug``.
+Every user error is printed as one line ``fuzzymesh: error: ...`` with the
+error's exit code (engine/errors.py: 2 bad input, 4 mesh rejected by the acceptance
+gate; 1 for lint findings, 3 internal faults); no traceback unless ``--debug``.
 """
 from __future__ import annotations
 
@@ -78,6 +79,9 @@ def build_parser() -> argparse.ArgumentParser:
     mesh.add_argument("--max-elements", type=_positive_float, default=None,
                       help="refuse jobs expected to exceed this many tetrahedra (default 2e7)")
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+    mesh.add_argument("--keep-invalid", action="store_true",
+                      help="when the acceptance gate rejects the mesh (exit 4), still write it as "
+                           "<name>.invalid.* for inspection")
     mesh.set_defaults(run=_cmd_mesh)
 
     lint = commands.add_parser("lint", help="check rule, pattern, recipe and feature files")
@@ -344,7 +348,7 @@ def _cmd_mesh(args) -> int:
     if args.seed is not None:
         overrides["seed"] = args.seed
     job = dataclasses.replace(job, **overrides)
-    result = run(job, max_elements=args.max_elements or DEFAULT_MAX_ELEMENTS)
+    result = run(job, max_elements=args.max_elements or DEFAULT_MAX_ELEMENTS, keep_invalid=args.keep_invalid)
     total = sum(result.timings.values())
     log.info("done: %d tetrahedra, %d nodes in %.2f s", len(result.mesh.tets), len(result.mesh.points), total)
     return 0
@@ -359,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except FuzzymeshError as error:
         print(f"fuzzymesh: error: {error.one_line()}", file=sys.stderr)
-        return 2
+        return error.exit_code
     except BrokenPipeError:   # output piped into e.g. head, which closed early
         sys.stdout = open(os.devnull, "w")
         return 0

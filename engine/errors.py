@@ -2,13 +2,17 @@
 
 Every error caused by the user's input is a :class:`FuzzymeshError`. Its text
 is complete on its own: where (file, line, column), what is wrong, and what to
-do about it. The CLI prints it as one line and exits with code 2.
+do about it. The CLI prints it as one line and exits with the error's ``exit_code``:
+2 for bad input or a limit, 4 for a mesh the acceptance gate rejected
+(3 is an internal fault, 1 lint findings).
 """
 from __future__ import annotations
 
 
 class FuzzymeshError(Exception):
     """A problem with the user's input, reported as one line."""
+
+    exit_code = 2
 
     def __init__(self, what: str, *, where: str | None = None, fix: str | None = None):
         self.what = what
@@ -37,3 +41,13 @@ class KnowledgeError(FuzzymeshError):
 
 class LimitError(FuzzymeshError):
     """The request is valid but would exceed a resource limit."""
+
+
+class MeshRejected(FuzzymeshError):
+    """The mesh failed the acceptance gate (engine/acceptance.py): nothing was written."""
+
+    exit_code = 4
+
+    def __init__(self, what: str, *, check: str, where: str | None = None, fix: str | None = None):
+        self.check = check
+        super().__init__(f"mesh rejected ({check}): {what}", where=where, fix=fix)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .acceptance import Tolerances
 from .errors import FuzzymeshError, KnowledgeError
 from .anchors import RegionDistance
 from .expr import Expression, ExpressionError
@@ -506,6 +507,17 @@ SIZING_FILE = {
     "base_pattern": Field(STRING, default="uniform-domain", doc="the pattern placed when a job places none"),
     "always_place": Field(LIST, default=[], doc="placements added to every job, unless it places the same "
                                                 "pattern itself"),
+    "acceptance": Field(MAPPING, default=None, doc="the acceptance gate's tolerances (engine/acceptance.py)", fields={
+        "min_dihedral": Field(NUMBER, default=Tolerances.min_dihedral, check=in_range(0.0, 60.0),
+                              doc="smallest dihedral angle of any tetrahedron, degrees"),
+        "volume": Field(NUMBER, default=Tolerances.volume, check=in_range(0.0, 1.0),
+                        doc="largest |mesh volume / input volume - 1|"),
+        "hausdorff": Field(NUMBER, default=Tolerances.hausdorff, check=in_range(0.0, 100.0),
+                           doc="largest distance between the mesh boundary and the input surface, each way, "
+                               "over the target size h there"),
+        "quadratic_jacobian": Field(NUMBER, default=Tolerances.quadratic_jacobian, check=in_range(0.0, 1.0),
+                                    doc="smallest scaled Jacobian of a 10-node tetrahedron"),
+    }),
 }
 
 
@@ -518,7 +530,8 @@ class KnowledgeBase:
     recipes: dict[str, Recipe] = field(default_factory=dict)
     feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
     sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain",
-                                                  "always_place": [], "where": "built-in defaults"})
+                                                  "always_place": [], "acceptance": Tolerances(),
+                                                  "where": "built-in defaults"})
     packer_settings: dict[str, dict] = field(default_factory=dict)   # rule file id -> its packer settings
 
     def add_file(self, path: Path) -> None:
@@ -547,6 +560,7 @@ class KnowledgeBase:
                 self._unique(self.feature_kinds, name, fk, fk.source)
         else:
             self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
+            self.sizing["acceptance"] = Tolerances(**(self.sizing["acceptance"] or {}))
             self.sizing["where"] = raw.where("base_pattern")
             if "always_place" in raw:
                 self.sizing["always_place"] = load_placements(raw["always_place"], raw.where("always_place"),

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -9,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import JobError, LimitError
+from .acceptance import check_mesh
+from .errors import JobError, LimitError, MeshRejected
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
 from .audit import Audit, audit_mesh
@@ -123,9 +125,27 @@ def describe_mesher_stats(stats: dict) -> str:
     return "; " + ", ".join(items) if items else ""
 
 
-def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True) -> Result:
-    """Mesh the job's solid; write the outputs when ``write``. Errors are FuzzymeshErrors."""
+def check_output_dir(job: Job) -> None:
+    """Refuse, before any work, an output folder that is a file or that cannot be created or written."""
+    directory = Path(job.output_dir)
+    where = job.where("output", "directory")
+    if directory.exists() and not directory.is_dir():
+        raise JobError(f"the output folder '{directory}' is an existing file", where=where,
+                       fix="name a folder (output.directory or --out)")
+    existing = next(p for p in (directory, *directory.parents) if p.exists())
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise JobError(f"cannot write the output folder '{directory}': '{existing}' is not writable", where=where,
+                       fix="name a folder you can write (output.directory or --out)")
+
+
+def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True,
+        keep_invalid: bool = False) -> Result:
+    """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
+    outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
+    or, with ``keep_invalid``, writes the files as ``<name>.invalid.*`` first."""
     timings: dict = {}
+    if write:
+        check_output_dir(job)
     kb = load_knowledge(job.knowledge)
     check_job_knowledge(job, kb)
     with stage("geometry", timings):
@@ -151,19 +171,22 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
              100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])
     with stage("quality", timings):
-        quality = tet_quality(mesh.points, mesh.tets).summary()
+        elements = tet_quality(mesh.points, mesh.tets)
+        quality = elements.summary()
     below = quality["below"]
     log.info("quality: min dihedral %.2f deg (1st percentile %.2f), %d below 10 deg, %d below 5 deg; "
              "radius ratio min %.3f, %d below 0.1 (%.2f s)", quality["min_dihedral"]["min"],
              quality["min_dihedral"]["p01"], below["min_dihedral_10"], below["min_dihedral_5"],
              quality["radius_ratio"]["min"], below["radius_ratio_0.1"], timings["quality"])
     with stage("boundary", timings):
-        boundary = boundary_report(mesh, geometry)
-    log.info("boundary (pymeshlab): %d triangles, %s, %d boundary edges, %d component(s); Hausdorff to the input "
-             "max %.4g, mean %.4g; area %+.3f %%, volume %+.3f %% of the input's; triangle quality min %.3f (%.2f s)",
+        boundary = boundary_report(mesh, geometry, sizing)
+    there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
+    log.info("boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
+             "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g; area %+.3f %%, volume %+.3f %% of the "
+             "input's; triangle quality min %.3f (%.2f s)",
              boundary["triangles"], "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
-             boundary["boundary_edges"], boundary["components"], boundary["hausdorff_input_to_mesh"]["max"],
-             boundary["hausdorff_input_to_mesh"]["mean"], 100 * (boundary["area"] / boundary["input_area"] - 1),
+             boundary["boundary_edges"], boundary["components"], there["max"], there["max_over_h"], there["mean"],
+             back["max"], back["max_over_h"], back["mean"], 100 * (boundary["area"] / boundary["input_area"] - 1),
              100 * (boundary["volume"] / boundary["input_volume"] - 1), boundary["triangle_quality"]["min"],
              timings["boundary"])
     with stage("conformity", timings):
@@ -181,9 +204,19 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              winners, 100 * np.mean(audit.cells["graded"]), timings["audit"])
     result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit,
                     conformity=conformity, boundary=boundary)
+    model = fe_model(job, mesh, geometry, features, audit) if write or job.output_order == 2 else None
+    with stage("acceptance", timings):
+        try:
+            check_mesh(mesh, geometry, features, elements, boundary, kb.sizing["acceptance"])
+        except MeshRejected:
+            if write and keep_invalid:
+                model.report = report_summary(result)
+                files = write_mesh(model, job.output_dir, f"{job.output_name}.invalid", job.output_formats)
+                log.warning("kept the rejected mesh for inspection: %s", ", ".join(map(str, files)))
+            raise
+    log.info("acceptance: passed (%.2f s)", timings["acceptance"])
     if write:
         with stage("output", timings):
-            model = fe_model(job, mesh, geometry, features, audit)
             model.report = report_summary(result)
             result.files = write_mesh(model, job.output_dir, job.output_name, job.output_formats)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])

@@ -123,32 +123,55 @@ def _metrics(points, tets, faces, edges, opposite):
     return volume, radius_ratio, mean_ratio, min_dihedral, max_dihedral, aspect
 
 
-def surface_deviation(mesh, geometry, sizing, samples: int = 400_000) -> dict:
-    """How far the mesh boundary strays from the input surface, absolute and over the local size h.
+def surface_distances(points: np.ndarray, triangles: np.ndarray, surface, size, samples: int) -> dict:
+    """The two-sided Hausdorff distance between a boundary (points (n, 3), triangles (t, 3)) and the input
+    ``surface`` (a trimesh), absolute and over the target size ``size(x) -> h`` at each sample.
 
-    ``input_to_mesh``: from the input surface (its vertices, edge midpoints and
-    ``samples`` points spread over it, seeded) to the mesh's boundary triangles, the one-sided Hausdorff
-    distance the chords make; ``nodes_off_surface``: the largest distance of a
-    boundary node from the input surface (0 up to rounding for a conforming mesher).
+    Each side is sampled at its vertices, its edge midpoints and ``samples`` area-weighted points (seeded,
+    so deterministic); every sample's distance to the other side is exact (libigl's AABB tree). Returns
+    ``input_to_mesh`` and ``mesh_to_input``, each ``{max, mean, RMS, max_over_h, at, at_distance}`` where
+    ``at`` is the sample with the largest distance / h and ``at_distance`` its distance.
     """
     import igl
 
     import trimesh
 
+    used, local = np.unique(triangles, return_inverse=True)
+    boundary = trimesh.Trimesh(points[used], local.reshape(-1, 3), process=False)
+    sides = {"input_to_mesh": (surface, boundary), "mesh_to_input": (boundary, surface)}
+    out = {}
+    for name, (source, target) in sides.items():
+        spread, _ = trimesh.sample.sample_surface(source, samples, seed=0)
+        at = np.vstack([source.vertices, source.vertices[source.edges_unique].mean(axis=1), spread])
+        d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(at, dtype=np.float64),
+                                                   np.ascontiguousarray(target.vertices, dtype=np.float64),
+                                                   np.ascontiguousarray(target.faces, dtype=np.int64))
+        distance = np.sqrt(d2)
+        ratio = distance / size(at)
+        worst = int(np.argmax(ratio))
+        out[name] = {"max": float(distance.max()), "mean": float(distance.mean()),
+                     "RMS": float(np.sqrt(d2.mean())), "max_over_h": float(ratio[worst]),
+                     "at": at[worst].tolist(), "at_distance": float(distance[worst])}
+    return out
+
+
+def surface_deviation(mesh, geometry, sizing, samples: int = 400_000) -> dict:
+    """How far the mesh boundary strays from the input surface, absolute and over the local size h.
+
+    ``input_to_mesh`` (and ``_over_h``): the one-sided Hausdorff distance the chords make, from
+    :func:`surface_distances` with ``samples`` points; ``nodes_off_surface``: the largest distance of a
+    boundary node from the input surface (0 up to rounding for a conforming mesher).
+    """
+    import igl
+
     surface = geometry.mesh
     boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
-    spread, _ = trimesh.sample.sample_surface(surface, samples, seed=0)
-    samples = np.vstack([surface.vertices, surface.vertices[surface.edges_unique].mean(axis=1), spread])
-    d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(samples, dtype=np.float64),
-                                               np.ascontiguousarray(mesh.points, dtype=np.float64),
-                                               np.ascontiguousarray(boundary, dtype=np.int64))
-    distance = np.sqrt(d2)
-    ratio = distance / sizing(samples)
+    distances = surface_distances(mesh.points, boundary, surface, sizing, samples)["input_to_mesh"]
     nodes = np.unique(boundary)
     n2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(mesh.points[nodes], dtype=np.float64),
                                                np.ascontiguousarray(surface.vertices, dtype=np.float64),
                                                np.ascontiguousarray(surface.faces, dtype=np.int64))
-    return {"input_to_mesh": float(distance.max()), "input_to_mesh_over_h": float(ratio.max()),
+    return {"input_to_mesh": distances["max"], "input_to_mesh_over_h": distances["max_over_h"],
             "nodes_off_surface": float(np.sqrt(n2.max()))}
 
 
@@ -183,15 +206,15 @@ HAUSDORFF_SAMPLES_PER_TRIANGLE = 40
 HAUSDORFF_SAMPLES = (20_000, 200_000)
 
 
-def boundary_report(mesh, geometry, samples: int | None = None) -> dict:
-    """The mesh's boundary surface checked by pymeshlab against the input surface: triangle quality
-    (inradius / circumradius, normalised), Hausdorff distance both ways (min / mean / max / RMS, with
-    ``samples`` points, by default HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary triangle within
-    HAUSDORFF_SAMPLES), topology (two-manifold, boundary edges, components, holes) and area and volume
-    against the input's."""
+def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
+    """The boundary faces of the mesh's tetrahedra checked against the input surface: triangle quality
+    (inradius / circumradius, normalised, by pymeshlab), the Hausdorff distance both ways, absolute and over
+    the target size ``size(x)`` (:func:`surface_distances`, with ``samples`` points, by default
+    HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary triangle within HAUSDORFF_SAMPLES), topology (two-manifold,
+    boundary edges, components, holes, by pymeshlab) and area and volume against the input's."""
     import pymeshlab
 
-    boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
+    boundary = mesh.boundary_faces()
     if samples is None:
         samples = int(np.clip(HAUSDORFF_SAMPLES_PER_TRIANGLE * len(boundary), *HAUSDORFF_SAMPLES))
     used, local = np.unique(boundary, return_inverse=True)
@@ -206,16 +229,12 @@ def boundary_report(mesh, geometry, samples: int | None = None) -> dict:
     meshes.set_current_mesh(1)
     reference = meshes.get_geometric_measures()
 
-    def hausdorff(sampled, target):
-        out = meshes.get_hausdorff_distance(sampledmesh=sampled, targetmesh=target, samplevert=True,
-                                            sampleface=True, samplenum=samples)
-        return {key: float(out[key]) for key in ("min", "mean", "max", "RMS")}
-
+    distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples)
     return {
         "triangles": int(len(boundary)),
         "triangle_quality": {"min": float(triangle_quality.min()), "median": float(np.median(triangle_quality)),
                              "below_0.3": int((triangle_quality < 0.3).sum())},
-        "hausdorff_input_to_mesh": hausdorff(1, 0), "hausdorff_mesh_to_input": hausdorff(0, 1),
+        "hausdorff_input_to_mesh": distances["input_to_mesh"], "hausdorff_mesh_to_input": distances["mesh_to_input"],
         "two_manifold": bool(topology["is_mesh_two_manifold"]),
         "boundary_edges": int(topology["boundary_edges"]),
         "components": int(topology["connected_components_number"]),

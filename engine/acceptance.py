@@ -1,0 +1,137 @@
+"""The acceptance gate: no mesh leaves the pipeline unless it is a valid model of the input solid.
+
+Run after meshing, the same for every packer and mesher (built-in or plug-in). The checks, in order:
+
+1. every tetrahedron has a positive volume;
+2. the tets' own boundary faces form a closed two-manifold (every edge in exactly two faces, with
+   opposite orientations) and, where the mesher declares boundary triangles, they are those faces;
+3. the mesh volume is within ``volume`` (a fraction) of the input solid's;
+4. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
+   size h at each sample point, is at most ``hausdorff`` in both directions;
+5. the smallest dihedral angle is at least ``min_dihedral`` degrees;
+6. for 10-node elements, the smallest scaled Jacobian is at least ``quadratic_jacobian``.
+
+The tolerances are expert knowledge: ``acceptance:`` in the sizing defaults (knowledge/sizing.yaml), which a
+job's own knowledge files may replace. A failed check raises :class:`~engine.errors.MeshRejected`: one line
+naming the check, where it fails (a point and the nearest patch) and what to do.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import MeshRejected
+
+KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invalid.* for inspection"
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """The gate's limits; see knowledge/sizing.yaml ``acceptance:``."""
+
+    min_dihedral: float = 5.0         # degrees
+    volume: float = 0.01              # |V_mesh / V_input - 1|
+    hausdorff: float = 0.25           # x the target size h, each direction
+    quadratic_jacobian: float = 0.2   # min scaled Jacobian of a 10-node tet
+
+
+def boundary_topology(tets: np.ndarray, declared: np.ndarray | None = None) -> dict:
+    """Topology of the tets' boundary faces (faces of one tet only): counts of edges not in exactly two
+    faces (``open_edges``), edges whose two faces run the same way (``misoriented``) and, when the mesher
+    declares ``declared`` boundary triangles (t, 3), how many of those are not tet faces or the reverse
+    (``undeclared``); ``faces`` the (b, 3) outward boundary faces; ``bad_node`` a node on a defect or -1."""
+    from .mesh import FACES
+
+    faces = tets[:, FACES].reshape(-1, 3)
+    keys, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
+    boundary = faces[np.sort(index[counts == 1])]
+    directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    undirected, edge_counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    open_edges = undirected[edge_counts != 2]
+    same_way, way_counts = np.unique(directed, axis=0, return_counts=True)
+    misoriented = same_way[way_counts > 1]
+    undeclared = 0
+    if declared is not None and len(declared):
+        ours, theirs = np.sort(boundary, axis=1), np.sort(declared, axis=1)
+        n = max(int(tets.max()) + 1, int(declared.max()) + 1)
+        a = (ours[:, 0] * n + ours[:, 1]) * n + ours[:, 2]
+        b = (theirs[:, 0] * n + theirs[:, 1]) * n + theirs[:, 2]
+        undeclared = int(len(np.setxor1d(a, b)))
+    bad = open_edges[:1, 0] if len(open_edges) else misoriented[:1, 0] if len(misoriented) else []
+    return {"faces": boundary, "open_edges": int(len(open_edges)), "misoriented": int(len(misoriented)),
+            "undeclared": undeclared, "bad_node": int(bad[0]) if len(bad) else -1}
+
+
+def check_mesh(mesh, geometry, features, quality, boundary: dict, tolerances: Tolerances,
+               quadratic_jacobian: np.ndarray | None = None) -> None:
+    """Raise MeshRejected at the first check the mesh fails (module docstring); ``quality`` is the
+    TetQuality of ``mesh``, ``boundary`` the :func:`engine.quality.boundary_report` of it, and
+    ``quadratic_jacobian`` (m,) the scaled Jacobians of its 10-node elements, if any."""
+    tets = mesh.tets
+
+    def where(point) -> str:
+        return _locate(np.asarray(point, dtype=float), geometry, features)
+
+    flat = np.flatnonzero(quality.volume <= 0)
+    if len(flat):
+        raise MeshRejected(f"{len(flat)} tetrahedra of zero or negative volume, the first at "
+                           f"{where(mesh.points[tets[flat[0]]].mean(axis=0))}", check="positive volumes",
+                           fix=f"mesh again with another seed and report the input; {KEEP_INVALID}")
+    topology = boundary_topology(tets, mesh.boundary if len(mesh.boundary) else None)
+    if topology["open_edges"] or topology["misoriented"] or topology["undeclared"]:
+        what = (f"{topology['open_edges']} boundary edges not shared by exactly two faces" if topology["open_edges"]
+                else f"{topology['misoriented']} boundary edges with inconsistently oriented faces"
+                if topology["misoriented"] else
+                f"{topology['undeclared']} boundary triangles of the mesher are not faces of its tetrahedra")
+        node = topology["bad_node"] if topology["bad_node"] >= 0 else int(topology["faces"][0, 0]) \
+            if len(topology["faces"]) else int(tets[0, 0])
+        raise MeshRejected(f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[node])}",
+                           check="closed two-manifold boundary",
+                           fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}")
+    error = mesh.volume / geometry.volume - 1
+    if not abs(error) <= tolerances.volume:
+        worst = boundary["hausdorff_mesh_to_input"] if error > 0 else boundary["hausdorff_input_to_mesh"]
+        raise MeshRejected(f"the mesh volume is {100 * error:+.2f} % of the input's (tolerance "
+                           f"{100 * tolerances.volume:g} %); the boundary strays most at {where(worst['at'])}",
+                           check="volume", fix="refine there (a smaller size, or a pattern placed on that feature) "
+                           f"or raise acceptance.volume in the sizing defaults; {KEEP_INVALID}")
+    for direction, text in (("hausdorff_input_to_mesh", "the input surface is"),
+                            ("hausdorff_mesh_to_input", "the mesh boundary is")):
+        far = boundary[direction]
+        if not far["max_over_h"] <= tolerances.hausdorff:
+            raise MeshRejected(f"{text} {far['max_over_h']:.3g} h ({far['at_distance']:.4g}) from the other at "
+                               f"{where(far['at'])} (tolerance {tolerances.hausdorff:g} h)", check="Hausdorff distance",
+                               fix="refine there (a smaller size, or a pattern placed on that feature) or raise "
+                               f"acceptance.hausdorff in the sizing defaults; {KEEP_INVALID}")
+    worst = int(np.argmin(quality.min_dihedral))
+    if not quality.min_dihedral[worst] >= tolerances.min_dihedral:
+        below = int((quality.min_dihedral < tolerances.min_dihedral).sum())
+        raise MeshRejected(f"{below} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the "
+                           f"smallest {quality.min_dihedral[worst]:.3g} deg at "
+                           f"{where(mesh.points[tets[worst]].mean(axis=0))}", check="minimum dihedral angle",
+                           fix="mesh again with another seed or a size that resolves the feature there, or lower "
+                           f"acceptance.min_dihedral in the sizing defaults; {KEEP_INVALID}")
+    if quadratic_jacobian is not None and len(quadratic_jacobian):
+        worst = int(np.argmin(quadratic_jacobian))
+        if not quadratic_jacobian[worst] >= tolerances.quadratic_jacobian:
+            raise MeshRejected(f"a 10-node element has a scaled Jacobian of {quadratic_jacobian[worst]:.3g} (floor "
+                               f"{tolerances.quadratic_jacobian:g}) at {where(mesh.points[tets[worst]].mean(axis=0))}",
+                               check="10-node element validity",
+                               fix="refine the curved surface there (more elements per circle) or lower "
+                               f"acceptance.quadratic_jacobian in the sizing defaults; {KEEP_INVALID}")
+
+
+def _locate(point: np.ndarray, geometry, features) -> str:
+    """``(x, y, z), near <patch description>``: the point and the patch of the input face nearest to it."""
+    import igl
+
+    from .describe import describe
+
+    _, face, _ = igl.point_mesh_squared_distance(point.reshape(1, 3), np.asarray(geometry.mesh.vertices, float),
+                                                 np.asarray(geometry.mesh.faces, np.int64))
+    patch = features.patches[int(features.face_patch[int(face[0])])]
+    scale = max(float(np.abs(point).max()), geometry.scale)
+    digits = max(3, int(np.ceil(np.log10(scale / (1e-4 * geometry.scale)))) if scale > 0 else 3)
+    coordinates = ", ".join(f"{c:.{digits}g}" for c in point)
+    return f"({coordinates}) near {describe(patch)}"

@@ -1,0 +1,149 @@
+"""The acceptance gate (engine/acceptance.py, issue 16): no broken mesh leaves with exit 0, whichever packer or
+mesher made it; a rejected mesh writes no files, prints one line naming the check, the place and the fix, and
+exits with code 4; --keep-invalid writes it as <name>.invalid.*; the tolerances come from the knowledge base."""
+from __future__ import annotations
+
+import dataclasses
+import textwrap
+
+import numpy as np
+import pytest
+
+from engine.acceptance import Tolerances, boundary_topology
+from engine.cli import main
+from engine.errors import MeshRejected
+from engine.job import job_from_dict, load_job
+from engine.knowledge import load_knowledge
+from engine.packing import VOLUME, get_packer, register_packer
+from engine.pipeline import run
+
+SMALL = {"geometry": {"shape": "cylinder", "parameters": {"radius": 5, "height": 12}}, "size": 2.5}
+BRACKET = {"geometry": {"shape": "l_bracket"}, "size": 12.0}
+
+
+def _job(tmp_path, body: dict, knowledge: str | None = None, **extra):
+    """A job file in tmp_path (with a knowledge folder holding ``knowledge`` as sizing.yaml, if given)."""
+    import yaml
+
+    data = {**body, **extra, "output": {"directory": "out", "formats": ["vtu", "msh"]}}
+    if knowledge is not None:
+        (tmp_path / "kb").mkdir()
+        (tmp_path / "kb" / "sizing.yaml").write_text(textwrap.dedent(knowledge))
+        data["knowledge"] = ["kb"]
+    path = tmp_path / "job.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _refused(capsys, argv, check: str) -> str:
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert code == 4, err
+    line = err.splitlines()[-1]
+    assert line.startswith(f"fuzzymesh: error: mesh rejected ({check}):"), line
+    assert "--keep-invalid" in line and "Traceback" not in err
+    return line
+
+
+def test_a_good_mesh_passes_and_both_hausdorff_directions_are_reported(tmp_path):
+    result = run(load_job(_job(tmp_path, BRACKET)))
+    for direction in ("hausdorff_input_to_mesh", "hausdorff_mesh_to_input"):
+        far = result.boundary[direction]
+        assert 0 < far["max"] <= far["max_over_h"] * 12.0 * 1.01 and far["max_over_h"] <= Tolerances.hausdorff
+    assert "acceptance" in result.timings and result.files
+
+
+def test_boundary_topology_finds_open_and_misoriented_edges():
+    tet = np.array([[0, 1, 2, 3]])
+    assert boundary_topology(tet)["open_edges"] == 0 and boundary_topology(tet)["misoriented"] == 0
+    # two tets sharing only the edge 0-1: that edge is in four boundary faces
+    bowtie = np.array([[0, 1, 2, 3], [0, 1, 4, 5]])
+    assert boundary_topology(bowtie)["open_edges"] == 1
+    # a tet and its mirror image glued on face 1-2-3, the mirror inverted: their outer faces disagree
+    flipped = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
+    assert boundary_topology(flipped)["misoriented"] > 0
+    # the mesher's declared boundary must be the tets' own faces
+    declared = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    assert boundary_topology(tet, declared)["undeclared"] == 0
+    assert boundary_topology(tet, declared[:3])["undeclared"] == 1
+
+
+def test_a_non_manifold_mesh_is_refused_with_no_files_and_kept_on_request(capsys, tmp_path):
+    # qhull connects the bracket's nodes into their convex hull and drops tets by centroid: its boundary is
+    # neither the bracket's surface nor (in general) two-manifold
+    job = _job(tmp_path, BRACKET, mesher="qhull")
+    code = main(["mesh", str(job)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 4 and err.startswith("fuzzymesh: error: mesh rejected ("), err
+    assert " near patch-" in err and "(centroid " in err and "--keep-invalid" in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    assert main(["mesh", str(job), "--keep-invalid"]) == 4
+    kept = {p.name for p in (tmp_path / "out").iterdir()}
+    assert {"mesh.invalid.msh", "mesh.invalid.vtu"} <= kept
+    assert all(".invalid." in name for name in kept)
+
+
+def test_a_plug_in_packer_is_gated_like_the_built_in_ones(tmp_path):
+    """A third-party packer that labels every node a volume node leaves the surface unconstrained."""
+    bubble = get_packer("bubble")
+
+    @register_packer("test-all-volume")
+    def all_volume(geometry, features, sizing, *, seed, knowledge=None):
+        packing = bubble(geometry, features, sizing, seed=seed, knowledge=knowledge)
+        keep = np.arange(len(packing)) % 3 != 0
+        return dataclasses.replace(packing, points=packing.points[keep], level=np.full(keep.sum(), VOLUME, np.int8),
+                                   entity=np.full(keep.sum(), -1), radius=packing.radius[keep], ids=None)
+
+    job = dataclasses.replace(load_job(_job(tmp_path, BRACKET)), packer="test-all-volume")
+    with pytest.raises(MeshRejected):
+        run(job)
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+RELAXED = {"min_dihedral": 0.0, "volume": 0.5, "hausdorff": 50.0}
+
+
+@pytest.mark.parametrize("setting, check", [({"min_dihedral": 45.0}, "minimum dihedral angle"),
+                                            ({"volume": 1e-7}, "volume"),
+                                            ({"hausdorff": 1e-4}, "Hausdorff distance")])
+def test_the_tolerances_are_knowledge(capsys, tmp_path, setting, check):
+    """The job's own sizing defaults replace the shipped ones (no curvature pattern here): relaxed
+    everywhere but in the one tolerance under test."""
+    tolerances = "".join(f"\n          {key}: {value}" for key, value in {**RELAXED, **setting}.items())
+    knowledge = f"""\
+        kind: sizing
+        base_pattern: uniform-domain
+        acceptance:{tolerances}
+        """
+    job = _job(tmp_path, SMALL, knowledge)
+    assert load_knowledge([tmp_path / "kb"]).sizing["acceptance"] == Tolerances(**{**RELAXED, **setting})
+    line = _refused(capsys, ["mesh", str(job)], check)
+    assert " at (" in line and "acceptance." in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_tolerance_of_the_wrong_type_is_one_line(capsys, tmp_path):
+    job = _job(tmp_path, SMALL, """\
+        kind: sizing
+        acceptance:
+          min_dihedral: sharp
+        """)
+    assert main(["mesh", str(job)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sizing.yaml:3:" in err and "min_dihedral" in err
+
+
+def test_an_output_folder_that_is_a_file_is_refused_before_any_work(capsys, tmp_path):
+    job = _job(tmp_path, SMALL)
+    (tmp_path / "out").write_text("not a folder")
+    assert main(["mesh", str(job)]) == 2
+    err = capsys.readouterr().err
+    assert "is an existing file" in err and "job.yaml:" in err
+    assert "packing" not in err and "geometry:" not in err
+
+
+def test_the_exit_codes_are_documented():
+    from pathlib import Path
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert "exit code 4" in readme and "--keep-invalid" in readme
