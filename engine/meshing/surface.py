@@ -402,7 +402,10 @@ class PatchChart:
         else:
             self.kind = "conformal"
             self.vertex_uv = self._conformal_map(patch, geometry.source)
-            self.centres_uv = cKDTree(self.vertex_uv[self.faces].mean(axis=1))
+            self.flat = np.ascontiguousarray(np.column_stack([self.vertex_uv, np.zeros(len(self.vertex_uv))]))
+            self.flat_tree = igl.AABB()           # the chart's triangles in the plane z = 0: exact point location
+            self.flat_tree.init(self.flat, self.faces)
+            self.flat_tolerance = ON_EDGE * float(np.linalg.norm(np.ptp(self.vertex_uv, axis=0)))
 
     def _angle(self, x):
         r = x - self.cylinder.point
@@ -435,21 +438,19 @@ class PatchChart:
         return closest
 
     def _lift_conformal(self, uv):
+        """The point of the input triangle whose chart image holds ``uv`` (located exactly by an AABB tree of
+        the chart's triangles; the nearest centres in uv miss the long facets of a blend), NaN off the chart."""
         out = np.full((len(uv), 3), np.nan)
         if len(uv) == 0:
             return out
-        _, near = self.centres_uv.query(uv, k=min(16, len(self.faces)))
-        near = near.reshape(len(uv), -1)
-        for column in range(near.shape[1]):      # the first candidate face that contains the point
-            face = self.faces[near[:, column]]
-            a, b, c = (self.vertex_uv[face[:, i]] for i in range(3))
-            area = _cross2(b - a, c - a)
-            wb, wc = _cross2(uv - a, c - a) / area, _cross2(b - a, uv - a) / area
-            weights = np.column_stack([1 - wb - wc, wb, wc])
-            hit = np.isnan(out[:, 0]) & (weights.min(axis=1) >= -ON_EDGE)   # a border node's roundoff counts in
-            weights = np.clip(weights[hit], 0.0, None)
-            weights /= weights.sum(axis=1, keepdims=True)
-            out[hit] = np.einsum("ij,ijk->ik", weights, self.vertices[face[hit]])
+        query = np.ascontiguousarray(np.column_stack([uv, np.zeros(len(uv))]), dtype=np.float64)
+        squared, face, closest = self.flat_tree.squared_distance(self.flat, self.faces, query)
+        hit = squared <= self.flat_tolerance ** 2      # a border node's roundoff counts in
+        corners = self.flat[self.faces[face[hit]]]
+        weights = igl.barycentric_coordinates(closest[hit], *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
+        weights = np.clip(weights, 0.0, None)
+        weights /= weights.sum(axis=1, keepdims=True)
+        out[hit] = np.einsum("ij,ijk->ik", weights, self.vertices[self.faces[face[hit]]])
         return out
 
     def copies(self, uv: np.ndarray, radius: np.ndarray) -> list:
