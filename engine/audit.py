@@ -4,7 +4,8 @@ Per element (at its centroid, by the sizing field's own evaluation): the target 
 element's actual size (mean edge length), the winning placed pattern and its membership mu, the
 runner-up and its mu, whether the gradation limit lowered the size and by how much, the winning
 zone and the placement (recipe or job entry) behind it. Per node: its level and entity, its bubble
-and the population-control event that inserted it (iteration, rule, firing degree).
+and the population-control event that inserted it (iteration, rule, firing degree). Every population
+event, insertions and deletions, is kept as columns of the legend's ``events``.
 
 Integer ids go into the mesh files (ParaView colours them as categories); the legend maps each id
 to its name, source file:line and parameters, and is written as JSON beside the mesh.
@@ -50,7 +51,7 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
         "zone": np.where(winner >= 0, zone_offset[np.maximum(winner, 0)] + evaluation.zone, -1).astype(np.int32),
         "placement": placement_of[winner].astype(np.int32),
     }
-    nodes, rules = _node_history(mesh, packing, knowledge)
+    nodes, rules, events = _node_history(mesh, packing, knowledge)
     legend = {
         "format": FORMAT, "job": job_source,
         "element_fields": {"h_target": "target size at the centroid", "h_actual": "mean edge length",
@@ -63,6 +64,9 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
                         "by level", "bubble": "bubble id, -1 for nodes the mesher added",
                         "inserted_at": "packing iteration of the inserting event, -1: initial bubble",
                         "insert_rule": "index into rules, -1: none", "insert_firing": "firing degree"},
+        "event_fields": {"bubble": "bubble id", "level": "packing level", "iteration": "packing iteration (step) "
+                         "of its level", "action": "insert or delete", "rule": "index into rules: the rule that "
+                         "fired most strongly", "firing": "its firing degree"},
         "global_size": sizing.global_size, "gradation_limit": sizing.gradation,
         "patterns": [{"index": k, **_plain(p.legend()), "placement_index": int(placement_of[k])}
                      for k, p in enumerate(sizing.placed)],
@@ -71,6 +75,7 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
         "placements": [_placement(next(p.placement for p in sizing.placed if id(p.placement) == key), i)
                        for i, key in enumerate(placements)],
         "rules": rules,
+        "events": events,
         "levels": list(NODE_LEVELS),
         "corners": [{"index": k, "id": c.id, "names": c.names} for k, c in enumerate(features.corners)],
         "curves": [{"index": k, "id": c.id, "names": c.names} for k, c in enumerate(features.curves)],
@@ -80,16 +85,15 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
 
 
 def _node_history(mesh: TetMesh, packing, knowledge):
-    """Per node: bubble id and the event that inserted it; the legend of the population rules."""
+    """Per node: bubble id and the event that inserted it; the legend of the population rules that fired, each
+    cited by the file:line of the rule base in force (``knowledge``), and every event."""
     n = len(mesh.points)
     bubble = mesh.node_bubble if mesh.node_bubble is not None else np.full(n, -1)
     events = packing.events
-    rule_ids, rule_of_event = np.unique(events.rule, return_inverse=True)
+    rule_ids, rule_of_event = np.unique(events.rule.astype(str), return_inverse=True)
     rule_ids, rule_of_event = rule_ids.tolist(), rule_of_event.astype(np.int32)
-    sources = {}
-    if knowledge is not None:
-        for base in knowledge.rulebases.values():
-            sources.update({r.id: r.source for r in base.rules})
+    sources = {} if knowledge is None else \
+        {f"{base.id}/{r.id}": r.source for base in knowledge.rulebases.values() for r in base.rules}
     inserted_at, insert_rule, insert_firing = np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n)
     is_insert = events.action == "insert"
     inserts = np.flatnonzero(is_insert)
@@ -106,10 +110,12 @@ def _node_history(mesh: TetMesh, packing, knowledge):
     deletions = np.bincount(rule_of_event[~is_insert], minlength=len(rule_ids))
     rules = [{"index": k, "id": r, "source": sources.get(r, ""), "insertions": int(insertions[k]),
               "deletions": int(deletions[k])} for k, r in enumerate(rule_ids)]
+    table = {"bubble": events.bubble, "level": events.level, "iteration": events.iteration,
+             "action": events.action, "rule": rule_of_event, "firing": events.firing}
     nodes = {"node_level": mesh.node_level.astype(np.int32), "node_entity": mesh.node_entity.astype(np.int32),
              "bubble": bubble.astype(np.int64), "inserted_at": inserted_at, "insert_rule": insert_rule,
              "insert_firing": insert_firing}
-    return nodes, rules
+    return nodes, rules, {name: _plain(np.asarray(column)) for name, column in table.items()}
 
 
 def _placement(placement, index: int) -> dict:
@@ -159,6 +165,40 @@ def explain_element(cells: dict, legend: dict, element: int) -> str:
                      f"{get['gradation']:.6g} (a smaller size nearby)")
     else:
         lines.append(f"the gradation limit g = {legend['gradation_limit']:g} is not active here")
+    return "\n".join(lines)
+
+
+def explain_node(nodes: dict, legend: dict, points: np.ndarray, node: int) -> str:
+    """A node's history from the saved audit: where it lies, its bubble and the population events of that
+    bubble (the insertion that made it, if any; a node's bubble survived, so it was never deleted)."""
+    n = len(points)
+    if not 0 <= node < n:
+        raise IndexError(f"node {node} is not in the mesh (0 to {n - 1})")
+    level = int(nodes["node_level"][node])
+    at = f"node {node} (0-based) at ({', '.join(f'{c:.6g}' for c in points[node])})"
+    if level < 0:
+        return f"{at}: a mid-edge node of a 10-node element, placed by the element, not by the packer"
+    name = legend["levels"][level]
+    if name == "steiner":
+        return f"{at}: added by the mesher (a Steiner node); no bubble, no population event"
+    entity = int(nodes["node_entity"][node])
+    table = {"corner": "corners", "curve": "curves", "patch": "patches"}.get(name)
+    on = ""
+    if table is not None and 0 <= entity < len(legend[table]):
+        feature = legend[table][entity]
+        on = f" on {feature['id']}" + (f" ({', '.join(feature['names'])})" if feature["names"] else "")
+    bubble = int(nodes["bubble"][node])
+    lines = [f"{at}: a {name} node{on}" + (f", bubble {bubble}" if bubble >= 0 else ", no bubble")]
+    events = legend.get("events", {})
+    mine = [i for i, b in enumerate(events.get("bubble", [])) if b == bubble] if bubble >= 0 else []
+    for i in mine:
+        rule = legend["rules"][events["rule"][i]]
+        lines.append(f"  {events['action'][i].rstrip('e')}ed at iteration {events['iteration'][i]} of the {events['level'][i]} "
+                     f"level by rule {rule['id']} ({rule['source'] or 'source unknown'}), firing degree "
+                     f"{events['firing'][i]:.4f}")
+    if bubble >= 0 and not mine:
+        lines.append(f"  an initial bubble of the {name} level: placed at the level's start and kept by the "
+                     "population rules" if name != "corner" else "  corners are fixed: no population control")
     return "\n".join(lines)
 
 

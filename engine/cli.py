@@ -88,14 +88,16 @@ def build_parser() -> argparse.ArgumentParser:
     lint.add_argument("paths", nargs="*", type=Path, help="files or folders (default: the shipped knowledge base)")
     lint.set_defaults(run=_cmd_lint)
 
-    explain = commands.add_parser("explain", help="explain why a point or an element got its size",
-                                  description="TARGET is a job file (--at: the sizing at a point) or a mesh "
-                                              "output folder or .vtu with its .audit.json (--element N, 0-based, "
-                                              "or --at: the element containing the point)")
+    explain = commands.add_parser("explain", help="explain why a point or an element got its size, or where a "
+                                  "node came from", description="TARGET is a job file (--at: the sizing at a point) "
+                                  "or a mesh output folder or .vtu with its .audit.json (--element N, 0-based, or "
+                                  "--at: the element containing the point; --node N, 0-based: the node's bubble and "
+                                  "the population event that inserted it)")
     explain.add_argument("job", metavar="TARGET", help="job YAML file, or output folder / .vtu file")
     where = explain.add_mutually_exclusive_group(required=True)
     where.add_argument("--at", nargs=3, type=float, metavar=("X", "Y", "Z"))
     where.add_argument("--element", type=int, metavar="N")
+    where.add_argument("--node", type=int, metavar="N")
     explain.set_defaults(run=_cmd_explain)
 
     report = commands.add_parser("report", help="rewrite the HTML report of a meshed output folder",
@@ -172,8 +174,9 @@ def _cmd_explain(args) -> int:
     target = Path(args.job)
     if target.is_dir() or target.suffix == ".vtu":
         return _explain_saved(target, args)
-    if args.element is not None:
-        raise JobError("--element needs a mesh output folder or .vtu, not a job file", where=str(target),
+    if args.at is None:
+        raise JobError(f"--{'element' if args.node is None else 'node'} needs a mesh output folder or .vtu, "
+                       "not a job file", where=str(target),
                        fix="run 'fuzzymesh mesh' first and give its output folder")
     from .explain import explain_point
     from .job import load_job
@@ -192,12 +195,12 @@ def _cmd_explain(args) -> int:
 
 
 def _explain_saved(target: Path, args) -> int:
-    """--element / --at on a written mesh, from its VTU audit fields and JSON legend."""
+    """--element / --at / --node on a written mesh, from its VTU audit fields and JSON legend."""
     import json
 
     import meshio
 
-    from .audit import explain_element, element_at
+    from .audit import explain_element, explain_node, element_at
 
     vtu = target if target.suffix == ".vtu" else next(iter(sorted(target.glob("*.vtu"))), target / "mesh.vtu")
     legend_path = vtu.with_suffix(".audit.json")
@@ -208,6 +211,12 @@ def _explain_saved(target: Path, args) -> int:
     mesh = meshio.read(vtu)
     cells = {name: values[0] for name, values in mesh.cell_data.items()}
     legend = json.loads(legend_path.read_text())
+    if args.node is not None:
+        try:
+            print(explain_node(mesh.point_data, legend, mesh.points, args.node))
+        except IndexError as error:
+            raise JobError(str(error), where=str(vtu), fix="give a node number from 0 to the node count - 1") from None
+        return 0
     element = args.element
     if args.at is not None:
         tets = next(block.data for block in mesh.cells if block.type.startswith("tetra"))[:, :4]

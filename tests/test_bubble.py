@@ -91,7 +91,7 @@ def test_population_control_restores_the_count(density, action, rule_base):
     assert abs(len(packing) - normal) <= 0.1 * normal
     acted = packing.events[packing.events.action == action]
     assert len(acted) >= 0.2 * abs(start - normal)
-    rule_ids = {r.id for r in KB.rulebases[f"population.{rule_base}"].rules}
+    rule_ids = {f"population.{rule_base}/{r.id}" for r in KB.rulebases[f"population.{rule_base}"].rules}
     assert set(acted.rule) <= rule_ids
     assert ((acted.firing > 0) & (acted.firing <= 1)).all()
     assert packing.stats["deleted" if action == "delete" else "inserted"] == len(acted)

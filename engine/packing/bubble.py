@@ -6,8 +6,8 @@ count (curves at equal steps of the integral of 1/h, patches and volume from
 density-following samples, as the lattice packer) and move under Shimada's
 interbubble force: m s'' + c s' = f, integrated with the classical 4th-order
 Runge-Kutta method (forces re-evaluated at every stage), 70 % of critical
-damping. Every ``control_interval`` steps the population rules of
-``knowledge/population.yaml`` delete strongly overlapping bubbles and add
+damping. Every ``control_interval`` steps the population rules in force
+(``knowledge/population.yaml`` or a job's replacement) delete strongly overlapping bubbles and add
 bubbles next to open ones; each event is logged with its rule and firing
 degree. After the last round a level settles for SETTLE_STEPS more steps,
 or less when the largest step falls below TOLERANCE x h. The settling is
@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import KnowledgeError
 from ..progress import progress
 from ..sizing import NODES_PER_H3
 from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
@@ -63,13 +64,28 @@ class LevelState:
         self.v = np.zeros_like(self.x)
 
 
+POPULATION = "population"   # the id of the rule file read: its rule bases 'delete' and 'insert', its packer settings
+INPUTS = {"delete": "overlap", "insert": "vacancy"}
+
+
 class PopulationControl:
-    """The population rules and packer settings from the knowledge base."""
+    """The population rules and packer settings in force: the rule file ``population``, the shipped one or the
+    one that replaces it (``overrides: true``, docs/rules.md section 2)."""
 
     def __init__(self, knowledge):
-        self.delete = knowledge.rulebases["population.delete"]
-        self.insert = knowledge.rulebases["population.insert"]
-        self.settings = knowledge.packer_settings["population"]
+        for name, variable in INPUTS.items():
+            base = knowledge.rulebases[f"{POPULATION}.{name}"]
+            if set(base.inputs) != {variable} or "action" not in base.extra:
+                raise KnowledgeError(f"rule base '{base.id}' must have the one input '{variable}' and an 'action'",
+                                     where=base.source, fix="keep the inputs and the action of the shipped "
+                                     "knowledge/population.yaml; change its terms, rules and thresholds")
+            setattr(self, name, base)
+        self.settings = knowledge.packer_settings[POPULATION]
+        for file_id, source in {b.id.split(".")[0]: b.source for b in knowledge.rulebases.values()}.items():
+            if file_id != POPULATION:
+                log.warning("%s: rule file '%s' is not read: the bubble packer reads the rule bases %s.delete and "
+                            "%s.insert; to replace them give this file 'id: %s' and 'overrides: true'", source,
+                            file_id, POPULATION, POPULATION, POPULATION)
 
     def decide(self, rule_base, inputs):
         outputs, firing = rule_base.evaluate(inputs)
@@ -255,10 +271,11 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
 
 
 def _events(bubbles, level_name, step, action, rule_base, rules, firing) -> np.ndarray:
-    """EVENT rows: ``bubbles`` acted on by ``action`` at ``step``; ``rules`` index ``rule_base.rules``."""
+    """EVENT rows: ``bubbles`` acted on by ``action`` at ``step``; ``rules`` index ``rule_base.rules``, cited as
+    ``RULE-BASE-ID/RULE-ID``."""
     rows = np.zeros(len(bubbles), EVENT)
     rows["bubble"], rows["level"], rows["iteration"], rows["action"] = bubbles, level_name, step, action
-    rows["rule"] = np.array([r.id for r in rule_base.rules])[rules]
+    rows["rule"] = np.array([f"{rule_base.id}/{r.id}" for r in rule_base.rules], dtype=object)[rules]
     rows["firing"] = firing
     return rows
 
