@@ -17,11 +17,12 @@ from scipy.sparse import csgraph
 
 from .mesh import NODE_LEVELS, TetMesh
 from .meshing.surface import arc_parameter
+from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 
 CORNER, CURVE = NODE_LEVELS.index("corner"), NODE_LEVELS.index("curve")
 TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
 TRIANGLE6_EDGES = np.array([[0, 1], [1, 2], [2, 0]])
-CURVING_ATTEMPTS = 4   # an element that would fold gets its mid-edge nodes moved half as far, this often
+BISECTION_STEPS = 8    # the fraction of its curving a mid-edge node keeps is found to 1 / 2**8
 
 
 @dataclass
@@ -134,9 +135,9 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6).
 
     Mid-edge nodes of boundary edges are moved onto the input surface (onto
-    their feature curve for sharp curves' edges); where an element's Jacobian would
-    turn non-positive its mid-edge nodes move only part of the way (straight
-    at last, :func:`limit_curving`), so every Jacobian is positive.
+    their feature curve for sharp curves' edges); where an element's scaled
+    Jacobian would fall below QUADRATIC_FLOOR its mid-edge nodes move only part
+    of the way (:func:`limit_curving`).
     """
     unique, tets10, triangles6 = quadratic_elements(mesh)
     straight = mesh.points[unique].mean(axis=1)
@@ -167,17 +168,43 @@ def quadratic_elements(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return unique, tets10, _boundary_triangle6(mesh.boundary, unique, len(mesh.points))
 
 
-def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray) -> np.ndarray:
-    """``curved`` node positions, except that the nodes of elements whose Jacobian would turn non-positive
-    move only half as far from ``straight`` (up to CURVING_ATTEMPTS times), and at last not at all."""
-    points = curved.copy()
-    for attempt in range(CURVING_ATTEMPTS + 1):
-        bad = np.flatnonzero(min_jacobian(points, tets10) <= 0)
-        if len(bad) == 0:
-            break
-        rows = np.unique(tets10[bad])
-        points[rows] = straight[rows] if attempt == CURVING_ATTEMPTS else (points[rows] + straight[rows]) / 2
-    return points
+def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
+                  floor: float = QUADRATIC_FLOOR) -> np.ndarray:
+    """Node positions (n, 3) from ``straight`` (n, 3) toward ``curved`` (n, 3) that keep every element of
+    ``tets10`` (m, 10) at a scaled Jacobian of at least ``floor`` (straight elements have 1).
+
+    Each moved node goes the fraction of the way found by bisection (BISECTION_STEPS): the last one at which
+    every element around it was at the floor; a node still in an element below it ends straight.
+    """
+    moved = np.flatnonzero((curved != straight).any(axis=1))
+    local = np.full(len(straight), -1)
+    local[moved] = np.arange(len(moved))
+    near = np.flatnonzero((local[tets10] >= 0).any(axis=1))     # the elements whose shape changes
+    lo, hi, fraction = np.zeros(len(moved)), np.ones(len(moved)), np.ones(len(moved))
+
+    def placed(fraction):
+        points = straight.copy()
+        points[moved] += fraction[:, None] * (curved[moved] - straight[moved])
+        return points
+
+    def below(fraction):
+        """(len(moved),) which moved nodes are in an element under the floor."""
+        bad = local[tets10[near[scaled_jacobian(placed(fraction), tets10[near]) < floor]]]
+        mask = np.zeros(len(moved), bool)
+        mask[bad[bad >= 0]] = True
+        return mask
+
+    bad = below(fraction)
+    if not bad.any():
+        return curved.copy()
+    for _ in range(BISECTION_STEPS):
+        hi, lo = np.where(bad, fraction, hi), np.where(bad, lo, fraction)
+        fraction = (lo + hi) / 2
+        bad = below(fraction)
+    fraction = np.where(bad, lo, fraction)
+    while (bad := below(fraction)).any():
+        fraction[bad] = 0
+    return placed(fraction)
 
 
 def row_index(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -201,32 +228,3 @@ def row_index(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
 def _boundary_triangle6(triangles, unique_edges, offset) -> np.ndarray:
     edges = np.sort(triangles[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1)
     return np.hstack([triangles, offset + row_index(unique_edges, edges).reshape(-1, 3)])
-
-
-# shape-function gradients of the 10-node tet at a point (r, s, t), VTK order
-def _gradients(r, s, t):
-    u = 1 - r - s - t
-    return np.array([
-        [-(4 * u - 1), -(4 * u - 1), -(4 * u - 1)],
-        [4 * r - 1, 0, 0], [0, 4 * s - 1, 0], [0, 0, 4 * t - 1],
-        [4 * (u - r), -4 * r, -4 * r],
-        [4 * s, 4 * r, 0],
-        [-4 * s, 4 * (u - s), -4 * s],
-        [-4 * t, -4 * t, 4 * (u - t)],
-        [4 * t, 0, 4 * r],
-        [0, 4 * t, 4 * s],
-    ])
-
-
-SAMPLES = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (0.25, 0.25, 0.25),
-           (0.5, 0, 0), (0.5, 0.5, 0), (0, 0.5, 0), (0, 0, 0.5), (0.5, 0, 0.5), (0, 0.5, 0.5)]
-
-
-def min_jacobian(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
-    """Smallest Jacobian determinant of each 10-node tet over its nodes and centroid (x 6 = volume if straight)."""
-    x = points[tets10]                                  # (m, 10, 3)
-    out = np.full(len(tets10), np.inf)
-    for sample in SAMPLES:
-        jacobian = np.einsum("mai,aj->mij", x, _gradients(*sample))
-        out = np.minimum(out, np.linalg.det(jacobian))
-    return out

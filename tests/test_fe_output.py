@@ -1,5 +1,5 @@
 """FE-ready files: physical groups in .msh (read by Gmsh itself), node sets and element-face surfaces in
-Abaqus .inp, quadratic tetrahedra with positive Jacobians and boundary nodes on the surface."""
+Abaqus .inp, quadratic tetrahedra above the scaled-Jacobian floor and boundary nodes on the surface."""
 from __future__ import annotations
 
 import functools
@@ -11,10 +11,11 @@ import pytest
 import yaml
 
 from engine.cli import main
-from engine.fe import curve_edges, feature_groups, min_jacobian, quadratic, row_index
+from engine.fe import TET10_EDGES, curve_edges, feature_groups, quadratic, row_index
 from engine.io import ABAQUS_FACE
 from engine.mesh import NODE_LEVELS
 from engine.meshing.surface import arc_parameter
+from engine.quadratic import QUADRATIC_FLOOR, _gradients, scaled_jacobian
 from test_meshers import meshed, packed
 
 
@@ -74,12 +75,12 @@ def test_abaqus_surfaces_are_the_patches_faces(root):
     assert set(ABAQUS_FACE.values()) == set(faces)
 
 
-def test_quadratic_tets_have_positive_jacobians_and_curved_boundaries():
+def test_quadratic_tets_are_above_the_floor_and_curved_on_the_boundary():
     geometry, features, _, _ = packed("junction-edge")
     mesh = meshed("junction-edge")
     points, tets10, triangles6 = quadratic(mesh, geometry, features)
     assert tets10.shape == (len(mesh.tets), 10) and triangles6.shape == (len(mesh.boundary), 6)
-    assert (min_jacobian(points, tets10) > 0).all()
+    assert scaled_jacobian(points, tets10).min() >= QUADRATIC_FLOOR
     middle = np.unique(triangles6[:, 3:])
     _, distance, _ = geometry.closest_point(points[middle])
     assert np.mean(distance < 1e-9 * geometry.scale) > 0.99, "boundary mid-edge nodes on the input surface"
@@ -104,7 +105,7 @@ def test_quadratic_files_read_back(root):
     for name in ("mesh.vtu", "mesh.msh", "mesh.inp", "mesh.bdf", "mesh.med"):
         data = meshio.read(out / name)
         tets10 = data.cells_dict["tetra10"]
-        assert (min_jacobian(data.points, tets10) > 0).all(), name
+        assert scaled_jacobian(data.points, tets10).min() >= QUADRATIC_FLOOR, name
     assert "triangle6" in meshio.read(out / "mesh.msh").cells_dict
 
 
@@ -145,17 +146,48 @@ def test_mid_edge_nodes_on_flat_faces_stay_at_the_midpoint():
     assert offset[not_chord].max() < 1e-9 * result.geometry.scale
 
 
-def test_limit_curving_straightens_what_halving_cannot_unfold():
-    """A mid-edge node pulled far across its element: halving CURVING_ATTEMPTS times still folds it, so it
-    ends straight; a small pull that does not fold is kept as it is."""
-    from engine.fe import CURVING_ATTEMPTS, TET10_EDGES, limit_curving
+def test_limit_curving_keeps_each_element_above_the_floor_curving_as_far_as_it_can():
+    """A mid-edge node pulled far across its element ends straight (no fraction of the pull is above the floor);
+    a small pull is kept whole; a medium one is cut back by bisection to just above the floor."""
+    from engine.fe import BISECTION_STEPS, limit_curving
 
     corners = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     straight = np.vstack([corners, corners[TET10_EDGES].mean(axis=1)])
     tets10 = np.arange(10)[None]
-    far, near = straight.copy(), straight.copy()
-    far[4] += [0.0, 0.0, 2.0 ** (CURVING_ATTEMPTS + 3)]     # edge 0-1's mid-node far above the opposite corner
+    far, near, medium = straight.copy(), straight.copy(), straight.copy()
+    far[4] += [0.0, 0.0, 2.0 ** (BISECTION_STEPS + 3)]     # edge 0-1's mid-node far above the opposite corner
     near[4] += [0.0, -0.05, 0.0]
-    assert min_jacobian(far, tets10)[0] <= 0 < min_jacobian(near, tets10)[0]
+    medium[4] += [0.0, 0.3, 0.0]                          # towards corner 2: scaled Jacobian 1 - 4 x 0.3
+    assert scaled_jacobian(near, tets10)[0] >= QUADRATIC_FLOOR > scaled_jacobian(medium, tets10)[0]
     assert np.array_equal(limit_curving(straight, far, tets10), straight)
     assert np.array_equal(limit_curving(straight, near, tets10), near)
+    limited = limit_curving(straight, medium, tets10)
+    fraction = (limited[4] - straight[4])[1] / 0.3
+    assert np.array_equal(limited[[0, 1, 2, 3, 5, 6, 7, 8, 9]], straight[[0, 1, 2, 3, 5, 6, 7, 8, 9]])
+    assert 0 < fraction < 1 and QUADRATIC_FLOOR <= scaled_jacobian(limited, tets10)[0] < QUADRATIC_FLOOR + 0.01
+
+
+def test_scaled_jacobian_bounds_det_j_from_below():
+    """1 on a straight element; at most min det J / det J straight over a fine sampling, and equal to it where
+    the minimum is at a corner; negative where an interior point folds."""
+    corners = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    straight = np.vstack([corners, corners[TET10_EDGES].mean(axis=1)])
+    tets10 = np.arange(10)[None]
+    assert np.isclose(scaled_jacobian(straight, tets10)[0], 1.0)
+    grid = np.linspace(0, 1, 13)
+    r, s, t = (a.ravel() for a in np.meshgrid(grid, grid, grid, indexing="ij"))
+    inside = r + s + t <= 1 + 1e-12
+    gradients = np.array([_gradients(*p) for p in zip(r[inside], s[inside], t[inside])])   # (p, 10, 3)
+    rng = np.random.default_rng(0)
+    tight = 0
+    for _ in range(50):
+        points = straight.copy()
+        points[4:] += rng.normal(0, 0.1, (6, 3))
+        sampled = np.linalg.det(np.einsum("ai,paj->pij", points, gradients)).min()
+        bound = scaled_jacobian(points, tets10)[0]
+        assert bound <= sampled + 1e-12
+        tight += np.isclose(bound, sampled)
+    assert tight > 10, "the bound is the corner value where the minimum is at a corner"
+    folded = straight.copy()
+    folded[4] += [0.2, 0.6, 0.6]   # edge 0-1's mid-node beyond the opposite face
+    assert scaled_jacobian(folded, tets10)[0] < 0
