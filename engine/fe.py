@@ -6,22 +6,29 @@ where the surface holds several), one per surface patch (its name, or its id suc
 with its boundary triangles, one per named or unnamed feature curve with its mesh edges, one per
 named corner. They become physical groups in ``.msh``, node sets, element sets and element-face
 surfaces in Abaqus ``.inp``, and element groups in ``.med``.
+
+Every boundary face is a face of exactly one tetrahedron (:func:`tet_boundary`), outward, with that
+tet's edge mid-nodes; its patch is the mesher's for the same triangle, so a group never names a
+triangle the tets split along the other diagonal.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import igl
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from .mesh import NODE_LEVELS, TetMesh
+from .mesh import FACES, NODE_LEVELS, TetMesh
 from .meshing.surface import arc_parameter
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 
 CORNER, CURVE = NODE_LEVELS.index("corner"), NODE_LEVELS.index("curve")
 TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
-TRIANGLE6_EDGES = np.array([[0, 1], [1, 2], [2, 0]])
+# (4, 6) per side k of a tet (FACES[k]): its corners and its edges' mid-nodes, 10-node local indices in triangle6 order
+SIDE_NODES = np.array([[*f, *(4 + TET10_EDGES.tolist().index(sorted((f[i], f[(i + 1) % 3]))) for i in range(3))]
+                       for f in FACES.tolist()])
 BISECTION_STEPS = 8    # the fraction of its curving a mid-edge node keeps is found to 1 / 2**8
 
 
@@ -64,12 +71,13 @@ def feature_groups(mesh: TetMesh, features, body: np.ndarray | None = None) -> l
         groups += [Group(f"solid-{b + 1}", 3, np.flatnonzero(body == b)) for b in range(body.max() + 1)]
     if len(mesh.boundary) == 0:
         return groups
+    owner, side, face_patch = tet_boundary(mesh)
+    faces = side_cells(mesh.tets, owner, side)
     for p, patch in enumerate(features.patches):
-        faces = mesh.boundary[mesh.boundary_patch == p]
-        if len(faces):
+        if (face_patch == p).any():
             for name in _names(patch):
-                groups.append(Group(name, 2, faces))
-    edges, curve = curve_edges(mesh, features)
+                groups.append(Group(name, 2, faces[face_patch == p]))
+    edges, curve = curve_edges(mesh, features, faces)
     for c, feature in enumerate(features.curves):
         if (curve == c).any():
             for name in _names(feature):
@@ -99,11 +107,42 @@ def _merge_same_names(groups: list[Group]) -> list[Group]:
                                                      g.dim, g.cells) for g in merged.values()]
 
 
-def curve_edges(mesh: TetMesh, features) -> tuple[np.ndarray, np.ndarray]:
-    """Boundary edges that lie on feature curves, and the curve index of each."""
+def tet_boundary(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces of one tet only, (owner (t,), side (t,), patch (t,)), sorted by patch: face k is
+    ``mesh.tets[owner[k], FACES[side[k]]]``, outward.
+
+    Its patch is the mesher's (``mesh.boundary_patch``) for the same triangle, else, where the tets split a
+    quad of the surface along the other diagonal than the mesher's triangles, that of the mesher's
+    triangle nearest its centroid; -1 where the mesh has no tagged boundary.
+    """
+    owner, side = mesh.boundary_sides()
+    faces = side_cells(mesh.tets, owner, side)
+    if len(mesh.boundary) == 0:
+        return owner, side, np.full(len(owner), -1, np.int64)
+    row = row_index(np.sort(mesh.boundary, axis=1), np.sort(faces, axis=1))
+    patch = mesh.boundary_patch[row]
+    other = np.flatnonzero(row < 0)
+    if len(other):
+        centroids = mesh.points[faces[other]].mean(axis=1)
+        nearest = igl.point_mesh_squared_distance(centroids, mesh.points, mesh.boundary.astype(np.int64))[1]
+        patch[other] = mesh.boundary_patch[nearest]
+    order = np.argsort(patch, kind="stable")
+    return owner[order], side[order], patch[order]
+
+
+def side_cells(tets: np.ndarray, owner: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """The boundary cells (t, 3) of 4-node ``tets`` or (t, 6) triangle6 of 10-node ``tets`` (m, 10) on
+    sides ``side`` of tets ``owner`` (from :func:`tet_boundary`), outward."""
+    return tets[owner[:, None], SIDE_NODES[side, :3 if tets.shape[1] == 4 else 6]]
+
+
+def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary edges that lie on feature curves, and the curve index of each; ``faces`` (t, 3) the
+    tets' boundary faces if already at hand."""
     if len(mesh.boundary) == 0:
         return np.zeros((0, 2), np.int64), np.zeros(0, np.int64)
-    directed = np.stack([mesh.boundary, np.roll(mesh.boundary, -1, axis=1)], axis=2).reshape(-1, 2)
+    faces = mesh.boundary_faces() if faces is None else faces
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
     edges = directed[directed[:, 0] < directed[:, 1]]
     on_curve = np.isin(mesh.node_level[edges], (CORNER, CURVE)).all(axis=1)
     edges = edges[on_curve]
@@ -132,7 +171,7 @@ def curve_edges(mesh: TetMesh, features) -> tuple[np.ndarray, np.ndarray]:
 
 
 def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6).
+    """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
 
     Mid-edge nodes of boundary edges are moved onto the input surface (onto
     their feature curve for sharp curves' edges); where an element's scaled
@@ -142,11 +181,10 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     unique, tets10, triangles6 = quadratic_elements(mesh)
     straight = mesh.points[unique].mean(axis=1)
     curved = straight.copy()
-    boundary_edges = np.unique(np.sort(mesh.boundary[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1), axis=0)
-    on_boundary = row_index(boundary_edges, unique) >= 0
-    if on_boundary.any():
+    on_boundary = np.unique(triangles6[:, 3:]) - len(mesh.points)
+    if len(on_boundary):
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
-    chords, curve = curve_edges(mesh, features)
+    chords, curve = curve_edges(mesh, features, triangles6[:, :3])
     chord_row = row_index(unique, np.sort(chords, axis=1))
     for c in np.unique(curve):    # a smooth cut's chords are curved onto the surface, like a patch's
         if not features.curves[c].sharp:
@@ -158,14 +196,16 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
 
 
 def quadratic_elements(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The 10-node connectivity of a linear mesh: (unique edges (e, 2), tets10, boundary triangle6).
+    """The 10-node connectivity of a linear mesh: (unique edges (e, 2), tets10 (m, 10), boundary triangle6
+    (t, 6) in the order of :func:`tet_boundary`).
 
     Mid-edge node k of the quadratic mesh is ``len(mesh.points) + k``, on edge ``unique[k]``.
     """
     edges = np.sort(mesh.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
     unique, inverse = np.unique(edges, axis=0, return_inverse=True)
     tets10 = np.hstack([mesh.tets, len(mesh.points) + inverse.reshape(-1, 6)])
-    return unique, tets10, _boundary_triangle6(mesh.boundary, unique, len(mesh.points))
+    owner, side, _ = tet_boundary(mesh)
+    return unique, tets10, side_cells(tets10, owner, side)
 
 
 def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
@@ -223,8 +263,3 @@ def row_index(table: np.ndarray, rows: np.ndarray) -> np.ndarray:
     order = np.argsort(table_keys)
     at = np.clip(np.searchsorted(table_keys[order], key(rows)), 0, len(table) - 1)
     return np.where(table_keys[order][at] == key(rows), order[at], -1)
-
-
-def _boundary_triangle6(triangles, unique_edges, offset) -> np.ndarray:
-    edges = np.sort(triangles[:, TRIANGLE6_EDGES].reshape(-1, 2), axis=1)
-    return np.hstack([triangles, offset + row_index(unique_edges, edges).reshape(-1, 3)])

@@ -11,7 +11,7 @@ import meshio
 import numpy as np
 
 from .errors import FuzzymeshError
-from .fe import TET10_EDGES, row_index
+from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
 from .mesh import TetMesh
 from .meshing.tetra import face_owners
 
@@ -24,7 +24,7 @@ class FEModel:
 
     points: np.ndarray
     tets: np.ndarray              # (m, 4) or (m, 10)
-    boundary: np.ndarray          # (t, 3) or (t, 6)
+    boundary: np.ndarray          # (t, 3) or (t, 6): the tets' own faces, outward (engine.fe.tet_boundary)
     node_level: np.ndarray        # -1 for mid-edge nodes
     node_entity: np.ndarray
     groups: list = field(default_factory=list)
@@ -36,7 +36,9 @@ class FEModel:
     @staticmethod
     def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
         """``quadratic``: (points, tets10, triangle6) from engine.fe.quadratic, or None for linear."""
-        points, tets, boundary = (mesh.points, mesh.tets, mesh.boundary) if quadratic is None else quadratic
+        if quadratic is None:
+            quadratic = mesh.points, mesh.tets, side_cells(mesh.tets, *tet_boundary(mesh)[:2])
+        points, tets, boundary = quadratic
         extra = len(points) - len(mesh.points)
 
         def pad(values):

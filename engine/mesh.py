@@ -46,7 +46,14 @@ class TetMesh:
         return float(self.volumes().sum())
 
     def boundary_faces(self) -> np.ndarray:
-        """The faces used by one tetrahedron only, outward: the mesh's actual boundary."""
-        faces = self.tets[:, FACES].reshape(-1, 3)
-        _, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
-        return faces[np.sort(index[counts == 1])]
+        """(t, 3) the faces used by one tetrahedron only, outward: the mesh's actual boundary."""
+        owner, side = self.boundary_sides()
+        return self.tets[owner[:, None], FACES[side]]
+
+    def boundary_sides(self) -> tuple[np.ndarray, np.ndarray]:
+        """(owner (t,), side (t,)): the faces used by one tetrahedron only are ``tets[owner, FACES[side]]``."""
+        faces = np.sort(self.tets[:, FACES].reshape(-1, 3), axis=1)
+        order = np.lexsort(faces.T[::-1])
+        start = np.flatnonzero(np.r_[True, (np.diff(faces[order], axis=0) != 0).any(axis=1)])
+        single = np.sort(order[start[np.diff(np.r_[start, len(faces)]) == 1]])
+        return single // 4, single % 4
