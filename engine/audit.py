@@ -51,9 +51,12 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
         "zone": np.where(winner >= 0, zone_offset[np.maximum(winner, 0)] + evaluation.zone, -1).astype(np.int32),
         "placement": placement_of[winner].astype(np.int32),
     }
+    won = np.bincount(winner[winner >= 0], minlength=len(sizing.placed))
+    reached = np.count_nonzero(evaluation.mu > 0, axis=0)
     nodes, rules, events = _node_history(mesh, packing, knowledge)
     legend = {
         "format": FORMAT, "job": job_source,
+        "pattern_fields": {"elements": "elements it wins", "reached": "elements where its membership is > 0"},
         "element_fields": {"h_target": "target size at the centroid", "h_actual": "mean edge length",
                            "size_ratio": "h_actual / h_target", "winner": "index into patterns",
                            "winner_mu": "membership of the winner", "runner_up": "index into patterns, -1: none",
@@ -68,8 +71,8 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
                          "of its level", "action": "insert or delete", "rule": "index into rules: the rule that "
                          "fired most strongly", "firing": "its firing degree"},
         "global_size": sizing.global_size, "gradation_limit": sizing.gradation,
-        "patterns": [{"index": k, **_plain(p.legend()), "placement_index": int(placement_of[k])}
-                     for k, p in enumerate(sizing.placed)],
+        "patterns": [{"index": k, **_plain(p.legend()), "placement_index": int(placement_of[k]),
+                      "elements": int(won[k]), "reached": int(reached[k])} for k, p in enumerate(sizing.placed)],
         "zones": [{"index": int(zone_offset[k] + j), "pattern": p.id, "id": z.zone.id, "law": z.zone.law,
                    "source": z.zone.source} for k, p in enumerate(sizing.placed) for j, z in enumerate(p.zones)],
         "placements": [_placement(next(p.placement for p in sizing.placed if id(p.placement) == key), i)
@@ -82,6 +85,16 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
         "patches": [{"index": k, "id": p.id, "names": p.names} for k, p in enumerate(features.patches)],
     }
     return Audit(cells, nodes, legend)
+
+
+def idle_patterns(legend: dict) -> list[str]:
+    """One warning per placed pattern that wins no element, saying whether it reaches any."""
+    return [f"placed pattern '{p['id']}' (pattern '{p['pattern']}', placed by {p['origin']} at {p['placement']}) "
+            "wins no element: " + (f"its membership is > 0 at {p['reached']} elements, but another pattern's is "
+                                   "higher (or equal, with a smaller size) at each" if p["reached"] else
+                                   "its membership is 0 at every element") +
+            "; check its placement, parameters and zones with 'fuzzymesh explain JOB --at X Y Z' near it"
+            for p in legend["patterns"] if p["elements"] == 0]
 
 
 def _node_history(mesh: TetMesh, packing, knowledge):
@@ -193,8 +206,8 @@ def explain_node(nodes: dict, legend: dict, points: np.ndarray, node: int) -> st
     mine = [i for i, b in enumerate(events.get("bubble", [])) if b == bubble] if bubble >= 0 else []
     for i in mine:
         rule = legend["rules"][events["rule"][i]]
-        lines.append(f"  {events['action'][i].rstrip('e')}ed at iteration {events['iteration'][i]} of the {events['level'][i]} "
-                     f"level by rule {rule['id']} ({rule['source'] or 'source unknown'}), firing degree "
+        lines.append(f"  {events['action'][i].rstrip('e')}ed at iteration {events['iteration'][i]} of the "
+                     f"{events['level'][i]} level by rule {rule['id']} ({rule['source'] or 'source unknown'}), firing degree "
                      f"{events['firing'][i]:.4f}")
     if bubble >= 0 and not mine:
         lines.append(f"  an initial bubble of the {name} level: placed at the level's start and kept by the "

@@ -14,7 +14,7 @@ from .acceptance import check_mesh
 from .errors import JobError, LimitError, MeshRejected
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
-from .audit import Audit, audit_mesh
+from .audit import Audit, audit_mesh, idle_patterns
 from .fe import feature_groups, quadratic, tet_bodies
 from .io import FEModel, write_mesh
 from .job import Job
@@ -47,6 +47,7 @@ class Result:
     audit: Audit | None = None
     conformity: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)   # for the report, beside the log
 
 
 @contextmanager
@@ -202,22 +203,25 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
                         zip(["none"] + [p.id for p in sizing.placed], shares) if share > 0)
     log.info("audit: %d elements sized by %s; %.1f %% lowered by the gradation limit (%.2f s)", len(mesh.tets),
              winners, 100 * np.mean(audit.cells["graded"]), timings["audit"])
+    warnings = idle_patterns(audit.legend)
+    for warning in warnings:
+        log.warning(warning)
     result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit,
-                    conformity=conformity, boundary=boundary)
+                    conformity=conformity, boundary=boundary, warnings=warnings)
     model = fe_model(job, mesh, geometry, features, audit) if write or job.output_order == 2 else None
     with stage("acceptance", timings):
         try:
             check_mesh(mesh, geometry, features, elements, boundary, kb.sizing["acceptance"])
         except MeshRejected:
             if write and keep_invalid:
-                model.report = report_summary(result)
+                model.report = {**report_summary(result), "warnings": warnings}
                 files = write_mesh(model, job.output_dir, f"{job.output_name}.invalid", job.output_formats)
                 log.warning("kept the rejected mesh for inspection: %s", ", ".join(map(str, files)))
             raise
     log.info("acceptance: passed (%.2f s)", timings["acceptance"])
     if write:
         with stage("output", timings):
-            model.report = report_summary(result)
+            model.report = {**report_summary(result), "warnings": warnings}
             result.files = write_mesh(model, job.output_dir, job.output_name, job.output_formats)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result

@@ -82,3 +82,33 @@ def test_explain_an_element_and_a_point_from_the_saved_files(junction, capsys):
     assert main(["explain", str(out), "--element", "-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("fuzzymesh: error: ")
+
+
+def test_a_placed_pattern_that_wins_no_element_is_a_warning_in_the_log_and_the_report(tmp_path, caplog):
+    import logging
+
+    import yaml
+
+    from engine.job import load_job
+    from engine.pipeline import run
+
+    job = tmp_path / "job.yaml"
+    job.write_text(yaml.safe_dump({
+        "geometry": {"shape": "cylinder"}, "size": 12.0, "output": {"formats": ["vtu"]},
+        "place": [{"pattern": "uniform-domain", "id": "coarse", "parameters": {"size": 1.2}},   # ties, larger h
+                  {"pattern": "uniform-domain", "id": "base"},
+                  {"pattern": "uniform-region", "id": "far-away", "parameters": {"size": 3},
+                   "region": {"box": {"min": [500, 500, 500], "max": [510, 510, 510]}}}]}))
+    with caplog.at_level(logging.WARNING):
+        result = run(load_job(job))
+    won = np.bincount(result.audit.cells["winner"] + 1, minlength=len(result.sizing.placed) + 1)[1:]
+    idle = {p.id for p, n in zip(result.sizing.placed, won) if n == 0}
+    assert {"coarse", "far-away"} <= idle and "base" not in idle
+    logged = [m for m in (r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
+              if "wins no element" in m]
+    report = json.loads((tmp_path / "out" / "mesh.report.json").read_text())
+    assert report["warnings"] == logged == result.warnings and len(logged) == len(idle)
+    coarse = next(w for w in logged if "'coarse'" in w)
+    far = next(w for w in logged if "'far-away'" in w)
+    assert f"{job}:" in coarse and "membership is > 0 at" in coarse and "higher" in coarse
+    assert "membership is 0 at every element" in far
