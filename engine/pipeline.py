@@ -147,6 +147,7 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     timings: dict = {}
     if write:
         check_output_dir(job)
+    packer, mesher = get_packer(job.packer), get_mesher(job.mesher)   # the plug-ins' contracts, before any work
     kb = load_knowledge(job.knowledge)
     check_job_knowledge(job, kb)
     with stage("geometry", timings):
@@ -164,10 +165,10 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
              "(%.2f s)", len(sizing.placed), ", ".join(p.id for p in sizing.placed), sizing.global_size,
              sizing.h_min, sizing.h_max, expected, timings["sizing"])
     with stage("packing", timings):
-        packing = get_packer(job.packer)(geometry, features, sizing, seed=job.seed, knowledge=kb)
+        packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
     with stage("meshing", timings):
-        mesh = get_mesher(job.mesher)(packing, geometry, features, seed=job.seed)
+        mesh = mesher(packing, geometry, features, seed=job.seed)
     log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)", job.mesher,
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
              100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])

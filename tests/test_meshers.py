@@ -1,9 +1,11 @@
-"""Meshers: the contract every registered mesher keeps, and the default mesher's acceptance on the
-issue's solids (closed conforming boundary, volume, Hausdorff distance, element quality)."""
+"""Packers and meshers: the contract every registered packer and mesher keeps (plug-ins included), and the
+default mesher's acceptance on the issue's solids (closed conforming boundary, volume, Hausdorff distance,
+element quality)."""
 from __future__ import annotations
 
 import functools
 
+import igl
 import numpy as np
 import pytest
 
@@ -13,7 +15,7 @@ from engine.mesh import NODE_LEVELS, TetMesh
 from engine.meshing import get_mesher, mesher_names
 from engine.meshing.qhull import boundary_defects
 from engine.meshing.surface import arc_parameter
-from engine.packing import get_packer
+from engine.packing import CORNER, CURVE, EVENT, LEVELS, PATCH, VOLUME, get_packer, packer_names
 from engine.pipeline import build_geometry, build_sizing
 from engine.quality import surface_deviation, tet_quality
 
@@ -52,6 +54,47 @@ def edge_use(triangles):
     directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
     keys, counts = np.unique(directed, axis=0, return_counts=True)
     return {tuple(k): c for k, c in zip(keys.tolist(), counts)}
+
+
+def check_packer_contract(packer: str, case: str = "l_bracket") -> None:
+    """What the meshers rely on (engine/plugins.py, Packer): every corner a node at its corner, curve nodes on
+    their curve, patch nodes on their patch, volume nodes inside, radius h / 2, the same nodes for the seed."""
+    geometry, features, sizing, _ = packed(case)
+    kb = load_knowledge()
+    packing = get_packer(packer)(geometry, features, sizing, seed=0, knowledge=kb)
+    n = len(packing)
+    assert packing.points.shape == (n, 3) and np.isfinite(packing.points).all() and n > 100
+    assert packing.level.shape == packing.entity.shape == packing.radius.shape == (n,)
+    assert set(np.unique(packing.level)) <= set(range(len(LEVELS)))
+    corners = np.flatnonzero(packing.level == CORNER)
+    assert sorted(packing.entity[corners]) == list(range(len(features.corners))), "every corner is a node"
+    assert np.allclose(packing.points[corners], [features.corners[i].point for i in packing.entity[corners]])
+    tolerance = 1e-9 * geometry.scale
+    for level, entities in ((CURVE, features.curves), (PATCH, features.patches)):
+        on = packing.level == level
+        assert set(np.unique(packing.entity[on])) <= set(range(len(entities)))
+        for k in np.unique(packing.entity[on]):
+            points = packing.points[on & (packing.entity == k)]
+            if level == CURVE:
+                assert np.linalg.norm(entities[k].point_at(arc_parameter(entities[k], points)) - points,
+                                      axis=1).max() < tolerance, f"nodes on curve {k}"
+            else:
+                faces = geometry.mesh.faces[entities[k].faces].astype(np.int64)
+                squared, _, _ = igl.point_mesh_squared_distance(points, np.asarray(geometry.mesh.vertices), faces)
+                assert np.sqrt(squared).max() < tolerance, f"nodes on patch {k}"
+    volume = packing.level == VOLUME
+    assert (packing.entity[volume] == -1).all() and geometry.contains(packing.points[volume]).all()
+    assert np.allclose(packing.radius, sizing(packing.points) / 2, rtol=1e-6)
+    assert packing.ids is None or len(np.unique(packing.ids)) == n
+    assert packing.events.dtype == EVENT
+    again = get_packer(packer)(geometry, features, sizing, seed=0, knowledge=kb)
+    assert np.array_equal(again.points, packing.points) and np.array_equal(again.level, packing.level), \
+        "deterministic"
+
+
+@pytest.mark.parametrize("packer", packer_names())
+def test_packer_contract(packer):
+    check_packer_contract(packer)
 
 
 @pytest.mark.parametrize("mesher", mesher_names())

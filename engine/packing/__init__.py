@@ -1,14 +1,16 @@
 """Packers place mesh nodes in the solid, sized by the sizing field.
 
-A packer is a function ``pack(geometry, features, sizing, *, seed) -> Packing``
-registered under a name; a job picks it with ``packer: NAME``. Third-party
-packers register through the ``fuzzymesh.packers`` entry-point group.
+A packer is a function ``pack(geometry, features, sizing, *, seed, knowledge) -> Packing``
+(the ``Packer`` protocol of engine/plugins.py) registered under a name; a job picks it
+with ``packer: NAME``. Third-party packers register through the ``fuzzymesh.packers``
+entry-point group (docs/plugins.md).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 import numpy as np
 
+from ..plugins import Packer
 from ..registry import Registry
 
 LEVELS = ("corner", "curve", "patch", "volume")
@@ -50,7 +52,7 @@ class Packing:
                        np.concatenate([no_events()] + [p.events for p in parts]).view(np.recarray))
 
 
-PACKERS = Registry("fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice"])
+PACKERS = Registry("fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice"], Packer)
 register_packer = PACKERS.register
 get_packer = PACKERS.get
 packer_names = PACKERS.names
