@@ -10,9 +10,12 @@ operators (each turned into the fan's normal frame) weighted by area x shape qua
 its three fans' (turned back), weighted by the fans' weights. So a sliver's ill-conditioned fit (0.06 mm
 across, 15 mm long) counts for little, and a fan of slivers only for as little.
 
-A face's radius is 1 / the largest |principal curvature| of its smoothed operator: the smaller principal
-radius, concave (a hole, a fillet) or convex alike; planar faces, and faces curving less than ``PLANAR`` x
-the model size, have none (inf). A planar face along a tangent fillet takes some of the fillet's curvature
+A face's radius is its chord radius: 1 / max(|k1|, |k2|, 2 |k1 + k2| / 3) of its smoothed operator's
+principal curvatures k1, k2, concave (a hole, a fillet) or convex alike; planar faces, and faces curving less
+than ``PLANAR`` x the model size, have none (inf). A triangle of edge h on the surface strays from it by
+h^2 / (8 r) at most with r this radius: on a cylinder or a saddle it is the smaller principal radius (an edge
+across the axis), on a doubly curved blend (both curvatures of one sign) up to 3/4 of it, as an equilateral
+triangle's centre lies h^2 (k1 + k2) / 12 off the surface (h^2 / (6 r) on a sphere). A planar face along a tangent fillet takes some of the fillet's curvature
 (about twice its radius). One radius per face: along a cone's long facets it is the facet's, not its tip's.
 Measured once per geometry and feature angle (:func:`curvature`); the faces are grouped in classes of like
 radius by :func:`engine.thickness.classes`.
@@ -33,7 +36,8 @@ PLANAR = 10.0     # radii above this, times the model size, are planar (inf)
 
 @dataclass
 class Curvature:
-    """The smaller principal radius of curvature of each input face (inf where planar)."""
+    """The chord radius of each input face (inf where planar): the smaller principal radius, 3/4 of it on a
+    sphere (see the module doc)."""
 
     triangles: np.ndarray     # (m, 3, 3) the input faces
     radius: np.ndarray        # (m,)
@@ -82,7 +86,7 @@ def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:
     back = (turn.transpose(0, 2, 1) @ fan_operator[fan] @ turn).reshape(-1, 3, 3, 3)
     smooth = (back * corner_weight).sum(axis=1) / np.maximum(corner_weight.sum(axis=1), 1e-300)
     with np.errstate(divide="ignore"):
-        radius = np.where(good, 1.0 / _largest(frame.transpose(0, 2, 1) @ smooth @ frame), np.inf)
+        radius = np.where(good, 1.0 / _chord_curvature(frame.transpose(0, 2, 1) @ smooth @ frame), np.inf)
     radius[radius > PLANAR * scale] = np.inf
     return Curvature(T, radius)
 
@@ -133,7 +137,9 @@ def _rotations(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.eye(3) + K + K @ K / np.maximum(1.0 + np.einsum("ij,ij->i", a, b), 1e-12)[:, None, None]
 
 
-def _largest(operator: np.ndarray) -> np.ndarray:
-    """The largest |eigenvalue| of symmetric 2 x 2 matrices: the largest principal curvature."""
+def _chord_curvature(operator: np.ndarray) -> np.ndarray:
+    """max(|k1|, |k2|, 2 |k1 + k2| / 3) of symmetric 2 x 2 matrices with eigenvalues k1, k2: the curvature whose
+    h^2 / 8 bounds how far a triangle of edge h strays from the surface (the module doc)."""
     mean = (operator[:, 0, 0] + operator[:, 1, 1]) / 2
-    return np.abs(mean) + np.hypot((operator[:, 0, 0] - operator[:, 1, 1]) / 2, operator[:, 0, 1])
+    largest = np.abs(mean) + np.hypot((operator[:, 0, 0] - operator[:, 1, 1]) / 2, operator[:, 0, 1])
+    return np.maximum(largest, 4.0 / 3.0 * np.abs(mean))
