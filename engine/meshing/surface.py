@@ -297,7 +297,9 @@ def _triangulate_strip(chart, uv, radius, constraints, droppable):
 def _holes(chart, uv, radius, tri, constraints, crowded):
     """Points (uv, radius) to add where the triangulation is too coarse for the surface or the size:
     triangles whose chord strays more than DEVIATION x h from the curved patch, or acute ones whose
-    circumradius exceeds HOLE x h (a bubble missing). The point is the circumcentre where it lies in its triangle,
+    circumradius exceeds HOLE x h (a bubble missing), and, on a conformal chart, the input vertices that lie
+    more than DEVIATION x h off the triangle over them (a cone's tip inside a triangle: the vertex itself is
+    the point). The point is the circumcentre where it lies in its triangle,
     else the middle of its longest edge (the centroid when that edge is on the border); one per hole, none near
     a node or the border."""
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
@@ -328,6 +330,10 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
         badness = np.fmax(badness, deviation / (DEVIATION * h))
         badness[np.isnan(lifted[:, 0])] = 0.0     # off a conformal chart's triangles: nowhere to put a node
+        if chart.kind == "conformal":   # input vertices the triangles pass far from (a drill point's tip)
+            vertex_uv, vertex_badness, vertex_h = _stray_vertices(chart, uv, tri, corners[0], normal, h)
+            point, badness, h = (np.concatenate([point, vertex_uv]), np.concatenate([badness, vertex_badness]),
+                                 np.concatenate([h, vertex_h]))
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
         return np.zeros((0, 2)), np.zeros(0)
@@ -349,6 +355,22 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         if chosen[i]:
             chosen[[j for j in near if j > i]] = False
     return point[chosen], spacing[chosen] / 2
+
+
+def _stray_vertices(chart, uv, tri, corner, normal, h):
+    """(uv, badness, h) of the conformal chart's input vertices lying more than DEVIATION x h off the plane of
+    the triangle of ``tri`` (over ``uv``) whose image holds them; ``corner`` and ``normal`` (t, 3): a lifted
+    corner and the unit normal of each triangle, ``h`` (t,) its size."""
+    flat = np.ascontiguousarray(np.column_stack([uv, np.zeros(len(uv))]))
+    faces = np.ascontiguousarray(tri, dtype=np.int64)
+    query = np.ascontiguousarray(np.column_stack([chart.vertex_uv, np.zeros(len(chart.vertex_uv))]))
+    squared, face, _ = igl.point_mesh_squared_distance(query, flat, faces)
+    inside = np.flatnonzero(squared <= chart.flat_tolerance ** 2)
+    face = face[inside]
+    off = np.abs(np.einsum("ij,ij->i", chart.vertices[inside] - corner[face], normal[face]))
+    badness = np.nan_to_num(off / (DEVIATION * h[face]))
+    stray = badness > 1
+    return chart.vertex_uv[inside[stray]], badness[stray], h[face[stray]]
 
 
 def _crowding(uv, edges, candidate, h) -> np.ndarray:
