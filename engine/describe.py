@@ -61,7 +61,8 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
 
 def feature_records(features: Features) -> dict:
     """Every corner, curve and patch: id, names, kinds, size (curve length and circle radius, patch area
-    and cylinder radius), whether a curve is sharp (a smooth cut is one that charts a surface), centroid
+    and cylinder radius), whether a curve is sharp (a smooth cut is one that charts a surface), convex, its
+    dihedral angle (degrees, the kinds' ``dihedral_above`` / ``dihedral_below``), centroid
     and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
     out = {}
     for kind, plural in TYPES:
@@ -71,7 +72,8 @@ def feature_records(features: Features) -> dict:
             record = {"id": feature.id, "names": list(feature.names), "kinds": list(getattr(feature, "kinds", []))}
             if kind == "curve":
                 record.update(length=feature.length, radius=feature.circle.radius if feature.circle else None,
-                              closed=feature.closed, sharp=feature.sharp)
+                              closed=feature.closed, sharp=feature.sharp, convex=feature.convex,
+                              dihedral=feature.dihedral)
             if kind == "patch":
                 record.update(area=feature.area, radius=feature.cylinder.radius if feature.cylinder else None)
             record.update(centroid=centroid(feature).tolist(), bounds=[points.min(axis=0).tolist(),

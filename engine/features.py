@@ -59,6 +59,7 @@ class Curve:
     vertices: np.ndarray | None     # the surface vertices it runs through, in order (None for a given curve);
                                     # the points are these but for a smooth cut's zigzag (_unzigzagged)
     convex: bool | None = None      # None for a given curve
+    dihedral: float | None = None   # median angle between the face normals along it, degrees; None for a given curve
     circle: Circle | None = None
     names: list[str] = field(default_factory=list)
     on_surface: bool = True
@@ -167,7 +168,7 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
         patches, face_patch = _patches(geometry, adjacency[~sharp])
     sharp_edges = mesh.face_adjacency_edges[sharp]
     corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
-                              truly_sharp[sharp], threshold)
+                              np.degrees(mesh.face_adjacency_angles[sharp]), truly_sharp[sharp], threshold)
     return Features(corners, [c if c.sharp else _unzigzagged(c) for c in curves], patches, face_patch, feature_angle)
 
 
@@ -415,8 +416,8 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
     return patches, labels
 
 
-def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, truly_sharp: np.ndarray,
-            turn_threshold: float):
+def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, dihedral: np.ndarray,
+            truly_sharp: np.ndarray, turn_threshold: float):
     if len(edges) == 0:
         return [], []
     nv = len(vertices)
@@ -446,12 +447,12 @@ def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, truly_s
         members = np.flatnonzero(edge_curve == k)
         ordered, closed = _order_chain(edges[members], corner_mask)
         raw.append((int(min(ordered)), ordered, closed, bool(np.mean(convex[members]) >= 0.5),
-                    bool(np.mean(truly_sharp[members]) >= 0.5)))
+                    float(np.median(dihedral[members])), bool(np.mean(truly_sharp[members]) >= 0.5)))
     raw.sort(key=lambda item: item[0])
     curves = []
-    for i, (_, ordered, closed, is_convex, is_sharp) in enumerate(raw):
+    for i, (_, ordered, closed, is_convex, angle, is_sharp) in enumerate(raw):
         points = vertices[ordered]
-        curve = Curve(f"curve-{i}", points, closed, ordered, convex=is_convex, sharp=is_sharp)
+        curve = Curve(f"curve-{i}", points, closed, ordered, convex=is_convex, dihedral=angle, sharp=is_sharp)
         if closed:
             curve.circle = fit_circle(points)
         curves.append(curve)
@@ -575,6 +576,9 @@ def _passes(feature, test: str, value) -> bool:
         return value in feature.names
     if test == "circular":
         return (feature.circle is not None) == value
+    if test in ("dihedral_above", "dihedral_below"):
+        angle = feature.dihedral
+        return angle is not None and (angle > value if test == "dihedral_above" else angle < value)
     if test in ("cylindrical", "concave", "full_turn"):
         cylinder = feature.cylinder
         actual = cylinder is not None if test == "cylindrical" else bool(cylinder and getattr(cylinder, test))

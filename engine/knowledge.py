@@ -28,8 +28,10 @@ SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_
 DOMINANCE = ("membership", "tie")
 # anchors on classes of surface pieces of like measure (engine/thickness.py, engine/curvature.py), and their L
 LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width", "curvature": "curvature_radius"}
-FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "named"),
+FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "dihedral_above", "dihedral_below",
+                           "named"),
                  "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
+ANGLE_TESTS = ("dihedral_above", "dihedral_below")   # take an angle in degrees; "named" a name; the rest true/false
 COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
 
 
@@ -486,14 +488,21 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
     for name, body in raw["kinds"].items():
         k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}", raw["kinds"].where(name))
         allowed = FEATURE_TESTS[k["of"]]
-        for test, value in body["when"].items():
+        when = body["when"]
+        for test, value in when.items():
             if test not in allowed:
-                raise _err(f"unknown test '{test}' for a {k['of']}", body["when"].where(test),
+                raise _err(f"unknown test '{test}' for a {k['of']}", when.where(test),
                            f"tests for a {k['of']}: {', '.join(allowed)}")
-            want = str if test == "named" else bool
-            if not isinstance(value, want):
-                raise _err(f"test '{test}' takes {'a feature name' if want is str else 'true or false'}",
-                           body["when"].where(test))
+            if test in ANGLE_TESTS:
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 180:
+                    raise _err(f"test '{test}' takes an angle in degrees from 0 to 180, got {value!r}",
+                               when.where(test), f"e.g. '{test}: 60' (the angle between the faces' normals)")
+            elif not isinstance(value, str if test == "named" else bool):
+                raise _err(f"test '{test}' takes {'a feature name' if test == 'named' else 'true or false'}",
+                           when.where(test), f"e.g. '{test}: {'crack-front' if test == 'named' else 'true'}'")
+        if set(ANGLE_TESTS) <= set(when) and when["dihedral_above"] >= when["dihedral_below"]:
+            raise _err(f"no curve passes dihedral_above: {when['dihedral_above']} and dihedral_below: "
+                       f"{when['dihedral_below']}", when.where("dihedral_below"), "make dihedral_above the smaller")
         kinds[str(name)] = FeatureKind(str(name), k["of"], dict(body["when"]), k["doc"], raw["kinds"].where(name))
     del spec
     return kinds
