@@ -19,7 +19,7 @@ from engine.cli import main
 from engine.curvature import measure
 from engine.errors import LimitError
 from engine.explain import explain_point
-from engine.job import default_job, job_from_dict
+from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
 from engine.pipeline import build_geometry, build_sizing, run
 from engine.quality import tet_quality
@@ -158,8 +158,11 @@ def test_patterns_show_and_lint(capsys):
     assert main(["lint"]) == 0
 
 
+JUNCTION = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0}   # the cylinder (r 25, axis x = 60), no recipe
+
+
 def test_explain_and_the_element_guard_on_the_junction():
-    job = default_job()                                       # the cylinder (r 25, axis x = 60) at H = 8
+    job = job_from_dict(JUNCTION)
     geometry, features = build_geometry(job)
     sizing = build_sizing(job, geometry, features, KB)
     size = 2 * np.pi * 25 / PER_CIRCLE
@@ -178,12 +181,11 @@ WITHOUT_CURVATURE = {"kind": "sizing", "doc": "the shipped defaults without the 
 
 
 def test_the_junction_grows_by_less_than_30_percent(tmp_path):
-    """The default example: 10,626 tets without the rule, 12,891 with it (+21 %: the cylinder's wall at 6.5
+    """The junction at H = 8: 10,626 tets without the rule, 12,891 with it (+21 %: the cylinder's wall at 6.5
     instead of 8, 29 % of the elements sized by it)."""
     (tmp_path / "sizing.yaml").write_text(yaml.safe_dump(WITHOUT_CURVATURE))
-    before = run(job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0,
-                                "knowledge": [str(tmp_path / "sizing.yaml")]}), write=False)
-    after = run(default_job(), write=False)
+    before = run(job_from_dict({**JUNCTION, "knowledge": [str(tmp_path / "sizing.yaml")]}), write=False)
+    after = run(job_from_dict(JUNCTION), write=False)
     assert "curvature" not in [p.pattern for p in before.sizing.placed]
     assert 1.1 < len(after.mesh.tets) / len(before.mesh.tets) < 1.3
     winners = after.audit.cells["winner"]
