@@ -7,7 +7,9 @@ error is one line ``file:line:col: what is wrong; what is allowed`` (a
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +19,7 @@ from .errors import FuzzymeshError, KnowledgeError
 from .anchors import RegionDistance
 from .expr import Expression, ExpressionError
 from .fuzzy import Rule, RuleBase, Term, Variable
-from .schema import INTEGER, LIST, MAPPING, NUMBER, STRING, Field, in_range, positive, validate
+from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, finite, in_range, positive, validate
 from .yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
@@ -33,6 +35,8 @@ FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface"
                  "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
 ANGLE_TESTS = ("dihedral_above", "dihedral_below")   # take an angle in degrees; "named" a name; the rest true/false
 COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
+OVERRIDES = Field(BOOLEAN, default=False, doc="true: every name this file defines replaces the one of that name "
+                                              "read before it (e.g. a shipped pattern)")
 
 
 def _err(what, where, fix=None):
@@ -41,7 +45,7 @@ def _err(what, where, fix=None):
 
 def _expression(value, names: set[str], where: str) -> Expression:
     try:
-        return Expression(value, names)
+        return Expression(value, names, where)
     except ExpressionError as exc:
         raise _err(str(exc), where, "use numbers, parameter names, + - * / **, min(), max()") from None
 
@@ -91,6 +95,7 @@ PACKER_SETTINGS = {
 RULES_FILE = {
     "kind": Field(STRING, required=True),
     "id": Field(STRING, required=True, doc="the rule file's id"),
+    "overrides": OVERRIDES,
     "doc": Field(STRING, default=""),
     "rulebases": Field(MAPPING, required=True, open_keys=True, doc="NAME: rule base"),
     "packer": Field(MAPPING, fields=PACKER_SETTINGS, doc="settings the bubble packer reads with these rules"),
@@ -269,6 +274,7 @@ class Pattern:
 PATTERN_FILE = {
     "kind": Field(STRING, required=True),
     "name": Field(STRING, required=True, doc="the pattern's name, used by recipes and jobs"),
+    "overrides": OVERRIDES,
     "doc": Field(STRING, required=True, doc="what the pattern is for, shown by 'fuzzymesh patterns show'"),
     "anchor": Field(STRING, required=True, choices=ANCHORS, doc="what the pattern is placed on"),
     "accepts": Field(LIST, default=[], items=Field(STRING), doc="feature kinds 'every:' may place it on"),
@@ -280,7 +286,7 @@ PATTERN_FILE = {
     "roles": Field(MAPPING, default={}, open_keys=True, doc="other features the pattern uses: ROLE: {default, doc}"),
     "zones": Field(LIST, required=True, doc="one or more zones"),
 }
-PARAMETER = {"default": Field(NUMBER, doc="the value when the placement gives none"),
+PARAMETER = {"default": Field(NUMBER, check=finite, doc="the value when the placement gives none"),
              "doc": Field(STRING, required=True, doc="what the parameter means")}
 ROLE = {"default": Field(STRING, doc="feature name used when the placement gives none"),
         "doc": Field(STRING, required=True)}
@@ -336,6 +342,8 @@ def load_pattern(raw: Located, source: str) -> Pattern:
         if not isinstance(body, Located):
             raise _err("each zone must be a mapping", raw.where("zones"))
         pattern.zones.append(_zone(body, names, gap_names, roles, seen))
+    if all(p.default is not None for p in params.values()):
+        check_values(pattern, {name: p.default for name, p in params.items()})
     return pattern
 
 
@@ -372,6 +380,95 @@ def _zone(body: Located, names, gap_names, roles, seen) -> Zone:
     active = _expression(z["active_if"], gap_names, body.where("active_if")) if z["active_if"] else None
     return Zone(z["id"], distance, size["law"], expr["near"], expr["far"], expr["over"], expr["exponent"],
                 trapezoid, height, active, body.where())
+
+
+# ------------------------------------------------------------------------------- pattern values
+
+# where the knowledge is checked without a solid: every pattern at these global sizes H, and lengths L of
+# these multiples of H, with the gaps of its roles 0 (so ligament zones are on)
+SAMPLE_H = (1.0, 10.0, 100.0)
+SAMPLE_L = (0.1, 1.0, 10.0)
+
+
+def check_values(pattern: Pattern, parameters: dict, placement: "Placement | None" = None) -> None:
+    """Evaluate every zone of ``pattern`` with ``parameters`` at the sample L and H (L the placement's
+    ``scale`` if it gives one), so a broken size law is found before any geometry is read."""
+    lengths = [None] if pattern.scale == "none" else \
+        [placement.scale] if placement is not None and placement.scale is not None else None
+    for H in SAMPLE_H:
+        for L in lengths or [q * H for q in SAMPLE_L]:
+            env = {**parameters, "H": H, **({"L": L} if L is not None else {}),
+                   **{f"gap_{role}": 0.0 for role in pattern.roles}}
+            for zone in pattern.zones:
+                zone_values(pattern, zone, env, placement, " at a sample L and H")
+
+
+def _value_error(pattern, zone, what, exprs, problem, fix, env, placement, on) -> KnowledgeError:
+    """What is wrong with a zone's value, at the expression's file:line or, when placed, at the placement."""
+    names = sorted(set().union(*(e.names for e in exprs)), key=lambda n: (n in ("H", "L"), n))
+    at = ", ".join(f"{n} = {env[n]:g}" for n in names)
+    shown = f"({exprs[0].text})" if len(exprs) == 1 else f"[{', '.join(e.text for e in exprs)}]"
+    text = f"pattern '{pattern.name}', zone '{zone.id}': {what} {shown} {problem}" + (f" at {at}" if at else "")
+    if placement is None:
+        return _err(f"{text}, with the default parameters{on}", exprs[0].where, fix)
+    given = [n for n in names if n in placement.parameters]
+    return _err(f"{text}, as placed here{on} (the {what} is at {exprs[0].where})",
+                placement.where(f"parameters.{given[0]}") if given else placement.source, fix)
+
+
+def expression_value(pattern: Pattern, zone: Zone, expr: Expression, what: str, env: dict,
+                     placement: "Placement | None" = None, on: str = "", finite: bool = True) -> float:
+    """``expr`` at ``env``: a finite number (``finite=False``: not NaN), else a located error."""
+    try:
+        number = expr(env)
+    except ExpressionError as exc:
+        problem = str(exc)
+    else:
+        if math.isfinite(number) or not finite and not math.isnan(number):
+            return number
+        problem = "is not a number" if math.isnan(number) else "overflows (beyond 1.8e308)"
+    raise _value_error(pattern, zone, what, [expr], problem,
+                       "change the expression or the parameters so it is a finite number for every L and H",
+                       env, placement, on)
+
+
+def zone_values(pattern: Pattern, zone: Zone, env: dict, placement: "Placement | None" = None,
+                on: str = "") -> dict | None:
+    """The zone's numbers at ``env`` (``near``, ``far``, ``over``, ``exponent``, ``height``, ``trapezoid``),
+    None where its ``active_if`` is off. Each must be finite, the sizes, ``over`` and ``exponent`` > 0, the
+    height in [0, 1] and the trapezoid ordered; else an error naming the expression's file:line, the values
+    used and, when given, the placement (``on`` says more: the feature it is bound to, or that L and H are
+    samples)."""
+    def value(expr, what, finite=True):
+        return expression_value(pattern, zone, expr, what, env, placement, on, finite)
+
+    def fail(what, exprs, problem, fix):
+        return _value_error(pattern, zone, what, exprs, problem, fix, env, placement, on)
+
+    height = "the membership height" if zone.trapezoid else "the membership"
+    near = value(zone.near, "'near'")
+    if zone.active_if is not None and not value(zone.active_if, "'active_if'", finite=False) > 0:
+        return None
+    numbers = {"near": near, "far": value(zone.far, "'far'") if zone.far else near,
+               "over": value(zone.over, "'over'") if zone.over else 1.0,
+               "exponent": value(zone.exponent, "'exponent'") if zone.exponent else 1.0,
+               "height": value(zone.height, height), "trapezoid": None}
+    for key in ("near", "far", "over", "exponent"):
+        expr = getattr(zone, key)
+        if expr is not None and numbers[key] <= 0:
+            raise fail(f"'{key}'", [expr], f"is {numbers[key]:g}, not > 0",
+                       "make it positive for every L and H")
+    if not 0 <= numbers["height"] <= 1:
+        raise fail(height, [zone.height], f"is {numbers['height']:g}, not in [0, 1]",
+                   "give a membership between 0 and 1")
+    if zone.trapezoid is not None:
+        points = tuple(value(e, f"trapezoid point {i + 1}") for i, e in enumerate(zone.trapezoid))
+        if not all(points[i] <= points[i + 1] for i in range(3)):
+            raise fail("the trapezoid", list(zone.trapezoid),
+                       f"is [{', '.join(f'{x:g}' for x in points)}], not ordered a <= b <= c <= d",
+                       "order its points for every L and H")
+        numbers["trapezoid"] = points
+    return numbers
 
 
 # -------------------------------------------------------------------------------------- recipes
@@ -451,6 +548,7 @@ class Recipe:
 RECIPE_FILE = {
     "kind": Field(STRING, required=True),
     "name": Field(STRING, required=True),
+    "overrides": OVERRIDES,
     "doc": Field(STRING, required=True, doc="what analysis the recipe is for"),
     "place": Field(LIST, required=True, doc="the placements"),
 }
@@ -483,7 +581,8 @@ FEATURE_KIND = {"of": Field(STRING, required=True, choices=("curve", "patch")),
 
 def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
     spec = validate(raw, {"kind": Field(STRING, required=True), "doc": Field(STRING, default=""),
-                          "kinds": Field(MAPPING, required=True, open_keys=True)}, KnowledgeError)
+                          "overrides": OVERRIDES, "kinds": Field(MAPPING, required=True, open_keys=True)},
+                    KnowledgeError)
     kinds = {}
     for name, body in raw["kinds"].items():
         k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}", raw["kinds"].where(name))
@@ -547,26 +646,27 @@ class KnowledgeBase:
         raw = load_yaml(path, KnowledgeError)
         source = str(path)
         if not isinstance(raw, Located):
-            raise _err("a knowledge file must be a YAML mapping with 'kind:'", source)
+            raise _err("a knowledge file must be a YAML mapping with 'kind:'", f"{source}:1:1")
         kind = raw.get("kind")
         if kind not in FILE_KINDS:
             raise _err(f"unknown or missing kind '{kind}'" if kind else "missing 'kind:'",
                        raw.where("kind") if "kind" in raw else raw.where(), f"kind is one of: {', '.join(FILE_KINDS)}")
         if kind == "rules":
             bases, settings = load_rules(raw, source)
-            for rb_id, base in bases.items():
-                self._unique(self.rulebases, rb_id, base, base.source)
+            names = raw["rulebases"]
+            self._add(self.rulebases, "rule base", {f"{raw['id']}.{n}": (bases[f"{raw['id']}.{n}"], names.where(n))
+                                                    for n in names}, raw)
             if settings is not None:
                 self.packer_settings[str(raw["id"])] = settings
         elif kind == "pattern":
             pattern = load_pattern(raw, source)
-            self._unique(self.patterns, pattern.name, pattern, raw.where("name"))
+            self._add(self.patterns, "pattern", {pattern.name: (pattern, raw.where("name"))}, raw)
         elif kind == "recipe":
             recipe = load_recipe(raw, source)
-            self._unique(self.recipes, recipe.name, recipe, raw.where("name"))
+            self._add(self.recipes, "recipe", {recipe.name: (recipe, raw.where("name"))}, raw)
         elif kind == "features":
-            for name, fk in load_feature_kinds(raw, source).items():
-                self._unique(self.feature_kinds, name, fk, fk.source)
+            kinds = load_feature_kinds(raw, source)
+            self._add(self.feature_kinds, "feature kind", {name: (fk, fk.source) for name, fk in kinds.items()}, raw)
         else:
             self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
             self.sizing["acceptance"] = Tolerances(**(self.sizing["acceptance"] or {}))
@@ -575,22 +675,49 @@ class KnowledgeBase:
                 self.sizing["always_place"] = load_placements(raw["always_place"], raw.where("always_place"),
                                                               "sizing defaults", "always")
 
-    def _unique(self, table: dict, key: str, value, where: str) -> None:
-        if key in table:
-            first = getattr(table[key], "source", "")
-            raise _err(f"'{key}' is defined twice (also in {first})", where, "give each a unique name")
-        table[key] = value
+    @staticmethod
+    def _add(table: dict, noun: str, items: dict, raw: Located) -> None:
+        """Add a file's named items ``{name: (value, where)}``: a name read before is an error unless the file
+        says ``overrides: true``, and then every name must replace one (so a misspelt name is no new one)."""
+        overrides = raw.get("overrides") is True
+        for key, (value, where) in items.items():
+            if key in table and not overrides:
+                first = getattr(table[key], "source", "")
+                raise _err(f"{noun} '{key}' is defined twice (also in {first})", where,
+                           "rename it, or add 'overrides: true' to this file to replace the other")
+            if key not in table and overrides:
+                raise _err(f"'overrides: true', but no {noun} '{key}' is defined before this file", where,
+                           f"remove 'overrides: true', or name the {noun} it replaces")
+        table.update({key: value for key, (value, _) in items.items()})
+
+    def problems(self, sizings: list[dict] | None = None) -> list[FuzzymeshError]:
+        """The cross-file checks, the first problem of each recipe and of the sizing defaults (``sizings``: of
+        each sizing file read, not only the one in force): their placements name existing patterns,
+        parameters, roles and feature kinds and evaluate (:func:`check_values`), the base pattern exists."""
+        def placements(items):
+            for placement in items:
+                check_placement(self, placement)
+
+        def defaults(sizing):
+            placements(sizing["always_place"])
+            if sizing["base_pattern"] not in self.patterns and self.patterns:
+                raise _err(f"base pattern '{sizing['base_pattern']}' is not in the pattern library",
+                           sizing["where"], f"name one of: {', '.join(sorted(self.patterns))}")
+
+        found = []
+        for check in [*(partial(placements, r.placements) for r in self.recipes.values()),
+                      *(partial(defaults, sizing) for sizing in sizings or [self.sizing])]:
+            try:
+                check()
+            except FuzzymeshError as exc:
+                found.append(exc)
+        return found
 
     def check(self) -> None:
-        """Cross-file checks: recipes and the sizing defaults name existing patterns, parameters and roles."""
-        for recipe in self.recipes.values():
-            for placement in recipe.placements:
-                check_placement(self, placement)
-        for placement in self.sizing["always_place"]:
-            check_placement(self, placement)
-        if self.sizing["base_pattern"] not in self.patterns and self.patterns:
-            raise _err(f"base pattern '{self.sizing['base_pattern']}' is not in the pattern library",
-                       self.sizing["where"], f"name one of: {', '.join(sorted(self.patterns))}")
+        """Raise the first of :meth:`problems`."""
+        problems = self.problems()
+        if problems:
+            raise problems[0]
 
 
 def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
@@ -611,6 +738,7 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
     if missing:
         raise _err(f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}", placement.source,
                    "give them under 'parameters:'")
+    check_values(pattern, {**{n: p.default for n, p in pattern.parameters.items()}, **placement.parameters}, placement)
     anchor_key = {"point": ("point", "at"), "curve": ("at", "every"), "surface": ("at", "every"),
                   "region": ("region",), "domain": (), **{local: () for local in LOCAL_SCALES}}[pattern.anchor]
     given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
@@ -661,37 +789,29 @@ def load_knowledge(extra_paths=()) -> KnowledgeBase:
 
 
 def lint(paths) -> list[str]:
-    """One error line per broken file (and for cross-file problems); empty when all is well."""
-    errors = []
-    kb = KnowledgeBase()
+    """The first error of each file, one line each, empty when all is well: loading (patterns evaluated at sample
+    L and H), then the recipes and sizing defaults checked against the shipped knowledge and the linted files."""
     files = yaml_files(paths)
+    linted = {f.resolve() for f in files if f.exists()}
+    kb = KnowledgeBase()
+    for path in yaml_files(default_paths()):   # what the linted files add to, or must say they override
+        if path.resolve() not in linted:
+            try:
+                kb.add_file(path)
+            except FuzzymeshError:
+                pass
+    errors, sizings = [], []
     for path in files:
-        if not path.exists():
-            errors.append(f"{path}: file not found; check the path")
-            continue
         try:
+            before = kb.sizing
             kb.add_file(path)
+            if kb.sizing is not before:
+                sizings.append(kb.sizing)
         except FuzzymeshError as exc:
             errors.append(exc.one_line())
         except Exception as exc:  # a loader fault must not hide the other files' findings
             errors.append(f"{path}: internal error while reading ({exc.__class__.__name__}: {exc}); please report it")
-    if not errors:
-        # cross-check recipes against the default patterns plus the linted ones
-        base = KnowledgeBase()
-        for path in yaml_files(default_paths()):
-            if path.resolve() not in {f.resolve() for f in files}:
-                try:
-                    base.add_file(path)
-                except FuzzymeshError:
-                    pass
-        for table in ("patterns", "feature_kinds"):
-            merged = {**getattr(base, table), **getattr(kb, table)}
-            setattr(kb, table, merged)
-        try:
-            kb.check()
-        except FuzzymeshError as exc:
-            errors.append(exc.one_line())
-    return errors
+    return errors + [exc.one_line() for exc in kb.problems(sizings)]
 
 
 __all__ = ["KnowledgeBase", "Pattern", "Zone", "Recipe", "Placement", "FeatureKind", "load_knowledge", "lint",

@@ -25,7 +25,7 @@ from scipy import ndimage
 from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_distance, patch_distance
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
-from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement
+from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values
 from .curvature import curvature
 from .thickness import local_size
 
@@ -436,30 +436,17 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
     if L is not None:
         env["L"] = L
     where = placement.source
-
-    def number(expr, what, zone, finite=True):
-        try:
-            value = float(expr(env))
-        except (ZeroDivisionError, OverflowError, ValueError):
-            value = math.nan
-        if math.isnan(value) or (finite and not math.isfinite(value)):
-            raise KnowledgeError(f"{what} of zone '{zone.id}' of pattern '{pattern.name}' is not a finite number "
-                                 f"({expr.text})", where=where, fix=f"check the parameters (zone at {zone.source})")
-        return value
-
+    on = f" on {feature.id}" if feature is not None and getattr(feature, "id", None) else ""
     # the finest size the zones ask for sets the anchor sampling
-    nears = [number(z.near, "'near'", z) for z in pattern.zones]
-    if min(nears) <= 0:
-        raise KnowledgeError(f"pattern '{pattern.name}' asks for a size <= 0", where=where,
-                             fix="make the size parameters positive")
-    distance = make_distance(min(nears) / SAMPLES_PER_NEAR)
+    nears = [expression_value(pattern, zone, zone.near, "'near'", env, placement, on) for zone in pattern.zones]
+    spacing = min([near for near in nears if near > 0], default=global_size) / SAMPLES_PER_NEAR
+    distance = make_distance(spacing)
     roles = {}
     for role, (default, _) in pattern.roles.items():
         name = placement.roles.get(role, default)
         targets = [f for f in features.patches if name in f.names] or \
             [f for f in features.curves if name in f.names]
         if targets:
-            spacing = min(nears) / SAMPLES_PER_NEAR
             roles[role] = _union([patch_distance(geometry, f, spacing) if hasattr(f, "faces")
                                   else curve_distance(f, spacing) for f in targets])
             anchor_samples = getattr(distance, "samples", None)
@@ -469,27 +456,14 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
             log.info("note: %s: role '%s' of pattern '%s' names '%s', which this solid does not have; "
                      "the zones that use it are off", where, role, pattern.name, name)
     zones = []
-    for zone, near in zip(pattern.zones, nears):
+    for zone in pattern.zones:
         role = zone.distance.split(":", 1)[1] if zone.distance.startswith("ligament:") else None
         if role is not None and role not in roles:
             continue
-        if zone.active_if is not None and not number(zone.active_if, "'active_if'", zone, finite=False) > 0:
-            continue
-        far = number(zone.far, "'far'", zone) if zone.far else near
-        over = number(zone.over, "'over'", zone) if zone.over else 1.0
-        exponent = number(zone.exponent, "'exponent'", zone) if zone.exponent else 1.0
-        height = number(zone.height, "membership height", zone)
-        trapezoid = None
-        if zone.trapezoid is not None:
-            trapezoid = tuple(number(e, "trapezoid point", zone) for e in zone.trapezoid)
-            if not all(trapezoid[i] <= trapezoid[i + 1] for i in range(3)):
-                raise KnowledgeError(f"zone '{zone.id}' of pattern '{pattern.name}' evaluates to a trapezoid "
-                                     f"{trapezoid} that is not ordered", where=where, fix="check the parameters")
-        if far <= 0 or over <= 0 or not 0 <= height <= 1:
-            raise KnowledgeError(f"zone '{zone.id}' of pattern '{pattern.name}' needs far > 0, over > 0 and a "
-                                 f"membership height in [0, 1]", where=where, fix="check the parameters")
-        gap = env.get(f"gap_{role}", 0.0) if role else 0.0
-        zones.append(BoundZone(zone, near, far, over, exponent, trapezoid, height, role, gap))
+        numbers = zone_values(pattern, zone, env, placement, on)
+        if numbers is not None:
+            gap = env.get(f"gap_{role}", 0.0) if role else 0.0
+            zones.append(BoundZone(zone, **numbers, role=role, gap=gap))
     suffix = f"@{feature.id}" if feature is not None and (multiple or placement.every) else ""
     return PlacedPattern(placement.id + suffix, pattern.name, placement, getattr(feature, "id", None), L, params,
                          zones, distance, roles, ties=pattern.dominance == "tie")

@@ -6,6 +6,7 @@ itself and of each of its keys. Errors can then name ``file:line:col``.
 """
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -85,7 +86,16 @@ def _loader_for(source: str, error=FuzzymeshError):
             mapping.key_marks[key] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
         return mapping
 
+    def construct_float(loader, node):
+        value = loader.construct_yaml_float(node)
+        if math.isinf(value) and not node.value.lstrip("+-").lower().startswith("."):   # 1e400, not .inf
+            raise error(f"the number {node.value} is out of range (its magnitude is beyond 1.8e308: infinite)",
+                        where=f"{source}:{node.start_mark.line + 1}:{node.start_mark.column + 1}",
+                        fix="give a number of magnitude below 1.8e308")
+        return value
+
     LocatingLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
+    LocatingLoader.add_constructor("tag:yaml.org,2002:float", construct_float)
     return LocatingLoader
 
 
@@ -120,5 +130,5 @@ def load_yaml(path: str | Path, error=FuzzymeshError):
                     fix="give a readable UTF-8 YAML file") from None
     data = parse_yaml(text, source, error)
     if data is None:
-        raise error("the file is empty", where=source, fix="write the YAML content")
+        raise error("the file is empty", where=f"{source}:1:1", fix="write the YAML content")
     return data

@@ -396,7 +396,7 @@ def test_job_file_not_utf8(capsys, tmp_path):
 def test_empty_job_file(capsys, tmp_path, text):
     job = tmp_path / "job.yaml"
     job.write_text(text)
-    assert_refused(capsys, tmp_path, job, "empty", where=str(job))
+    assert_refused(capsys, tmp_path, job, "empty", where=f"{job}:1:1")
 
 
 @pytest.mark.parametrize("text", [

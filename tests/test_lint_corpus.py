@@ -154,7 +154,7 @@ def test_lint_names_the_defect_in_one_line(path, capsys):
 @pytest.mark.parametrize("path", _cases(jobs=True))
 def test_job_fails_validation_in_one_line(path, capsys, tmp_path, monkeypatch):
     line_no, fragment = _expectation(path)
-    monkeypatch.setattr("engine.pipeline.get_packer", _no_meshing)
+    monkeypatch.setattr("engine.pipeline.get_packer", lambda name: _no_meshing)   # looked up early, called late
     out_dir = tmp_path / "out"
     code, out, err = _run(["mesh", str(path), "--quiet", "--out", str(out_dir)], capsys)
     text = "\n".join(out + err)
