@@ -81,3 +81,18 @@ def test_a_plugin_that_does_not_load_is_named_and_does_not_stop_the_others(tmp_p
     MESHERS.get("delaunay")
     with pytest.raises(JobError, match="mesher 'broken' cannot be loaded .*no_such_module.*ModuleNotFoundError"):
         MESHERS.get("broken")
+
+
+def test_a_plugin_meshers_broken_mesh_is_rejected_by_the_acceptance_gate(tmp_path, monkeypatch, capsys):
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "holed_mesher.py").write_text(
+        "from engine.mesh import TetMesh\nfrom engine.meshing import get_mesher\n\n\n"
+        "def mesh(packing, geometry, features, *, seed):\n"
+        "    whole = get_mesher('delaunay')(packing, geometry, features, seed=seed)\n"
+        "    return TetMesh(whole.points, whole.tets[1:], whole.node_level, whole.node_entity)\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "src"))
+    register(monkeypatch, tmp_path / "site", "holed", {"fuzzymesh.meshers": {"holed": "holed_mesher:mesh"}})
+    assert main(["mesh", str(write_job(tmp_path, mesher="holed"))]) == 4
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith("fuzzymesh: error: mesh rejected ("), "the missing tet leaves a dent in the boundary"
+    assert not list((tmp_path / "out").glob("mesh.*"))
