@@ -219,7 +219,6 @@ def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
     moved = np.flatnonzero((curved != straight).any(axis=1))
     local = np.full(len(straight), -1)
     local[moved] = np.arange(len(moved))
-    near = np.flatnonzero((local[tets10] >= 0).any(axis=1))     # the elements whose shape changes
     lo, hi, fraction = np.zeros(len(moved)), np.ones(len(moved)), np.ones(len(moved))
 
     def placed(fraction):
@@ -227,22 +226,25 @@ def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
         points[moved] += fraction[:, None] * (curved[moved] - straight[moved])
         return points
 
-    def below(fraction):
-        """(len(moved),) which moved nodes are in an element under the floor."""
-        bad = local[tets10[near[scaled_jacobian(placed(fraction), tets10[near]) < floor]]]
+    def below(fraction, elements):
+        """(len(moved),) which moved nodes are in one of ``elements`` under the floor."""
+        bad = local[tets10[elements[scaled_jacobian(placed(fraction), tets10[elements]) < floor]]]
         mask = np.zeros(len(moved), bool)
         mask[bad[bad >= 0]] = True
         return mask
 
-    bad = below(fraction)
+    near = np.flatnonzero((local[tets10] >= 0).any(axis=1))     # the elements whose shape changes
+    bad = below(fraction, near)
     if not bad.any():
         return curved.copy()
+    around = local[tets10[near]]
+    near = near[((around >= 0) & bad[around]).any(axis=1)]      # from here on, only those around nodes cut back
     for _ in range(BISECTION_STEPS):
         hi, lo = np.where(bad, fraction, hi), np.where(bad, lo, fraction)
         fraction = (lo + hi) / 2
-        bad = below(fraction)
+        bad = below(fraction, near)
     fraction = np.where(bad, lo, fraction)
-    while (bad := below(fraction)).any():
+    while (bad := below(fraction, near)).any():
         fraction[bad] = 0
     return placed(fraction)
 
