@@ -4,7 +4,8 @@ Run after meshing, the same for every packer and mesher (built-in or plug-in). T
 
 1. every tetrahedron has a positive volume;
 2. the tets' own boundary faces form a closed two-manifold (every edge in exactly two faces, with
-   opposite orientations) and, where the mesher declares boundary triangles, they are those faces;
+   opposite orientations); the mesher's declared boundary triangles only name patches
+   (:func:`engine.fe.tet_boundary`);
 3. the mesh volume is within ``volume`` (a fraction) of the input solid's;
 4. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
    size h at each sample point, is at most ``hausdorff`` in both directions;
@@ -36,31 +37,23 @@ class Tolerances:
     quadratic_jacobian: float = 0.2   # min scaled Jacobian of a 10-node tet
 
 
-def boundary_topology(tets: np.ndarray, declared: np.ndarray | None = None) -> dict:
+def boundary_topology(tets: np.ndarray) -> dict:
     """Topology of the tets' boundary faces (faces of one tet only): counts of edges not in exactly two
-    faces (``open_edges``), edges whose two faces run the same way (``misoriented``) and, when the mesher
-    declares ``declared`` boundary triangles (t, 3), how many of those are not tet faces or the reverse
-    (``undeclared``); ``faces`` the (b, 3) outward boundary faces; ``bad_node`` a node on a defect or -1."""
+    faces (``open_edges``) and of edges whose two faces run the same way (``misoriented``); ``faces`` the
+    (b, 3) outward boundary faces; ``bad_node`` a node on a defect or -1."""
     from .mesh import FACES
 
     faces = tets[:, FACES].reshape(-1, 3)
-    keys, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
+    _, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
     boundary = faces[np.sort(index[counts == 1])]
     directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     undirected, edge_counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
     open_edges = undirected[edge_counts != 2]
     same_way, way_counts = np.unique(directed, axis=0, return_counts=True)
     misoriented = same_way[way_counts > 1]
-    undeclared = 0
-    if declared is not None and len(declared):
-        ours, theirs = np.sort(boundary, axis=1), np.sort(declared, axis=1)
-        n = max(int(tets.max()) + 1, int(declared.max()) + 1)
-        a = (ours[:, 0] * n + ours[:, 1]) * n + ours[:, 2]
-        b = (theirs[:, 0] * n + theirs[:, 1]) * n + theirs[:, 2]
-        undeclared = int(len(np.setxor1d(a, b)))
     bad = open_edges[:1, 0] if len(open_edges) else misoriented[:1, 0] if len(misoriented) else []
     return {"faces": boundary, "open_edges": int(len(open_edges)), "misoriented": int(len(misoriented)),
-            "undeclared": undeclared, "bad_node": int(bad[0]) if len(bad) else -1}
+            "bad_node": int(bad[0]) if len(bad) else -1}
 
 
 def check_mesh(mesh, geometry, features, quality, boundary: dict, tolerances: Tolerances,
@@ -78,16 +71,12 @@ def check_mesh(mesh, geometry, features, quality, boundary: dict, tolerances: To
         raise MeshRejected(f"{len(flat)} tetrahedra of zero or negative volume, the first at "
                            f"{where(mesh.points[tets[flat[0]]].mean(axis=0))}", check="positive volumes",
                            fix=f"mesh again with another seed and report the input; {KEEP_INVALID}")
-    topology = boundary_topology(tets, mesh.boundary if len(mesh.boundary) else None)
-    if topology["open_edges"] or topology["misoriented"] or topology["undeclared"]:
+    topology = boundary_topology(tets)
+    if topology["open_edges"] or topology["misoriented"]:
         what = (f"{topology['open_edges']} boundary edges not shared by exactly two faces" if topology["open_edges"]
-                else f"{topology['misoriented']} boundary edges with inconsistently oriented faces"
-                if topology["misoriented"] else
-                f"{topology['undeclared']} boundary triangles of the mesher are not faces of its tetrahedra")
-        node = topology["bad_node"] if topology["bad_node"] >= 0 else int(topology["faces"][0, 0]) \
-            if len(topology["faces"]) else int(tets[0, 0])
-        raise MeshRejected(f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[node])}",
-                           check="closed two-manifold boundary",
+                else f"{topology['misoriented']} boundary edges with inconsistently oriented faces")
+        raise MeshRejected(f"the boundary is not a closed two-manifold: {what}, e.g. at "
+                           f"{where(mesh.points[topology['bad_node']])}", check="closed two-manifold boundary",
                            fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}")
     error = mesh.volume / geometry.volume - 1
     if not abs(error) <= tolerances.volume:

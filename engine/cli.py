@@ -110,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
                              "longest and shortest extents, at the median node)")
     report.set_defaults(run=_cmd_report)
 
+    view = commands.add_parser("view", help="open the HTML report of a meshed output folder in the default browser")
+    view.add_argument("out", type=Path, metavar="OUT", help="output folder of 'fuzzymesh mesh'")
+    view.add_argument("--name", default=None, help="base name of the files (default: the one report there)")
+    view.set_defaults(run=_cmd_view)
+
     from .validation import CASES
 
     validate = commands.add_parser("validate", help="solve linear elasticity on a mesh and compare with a published "
@@ -250,21 +255,37 @@ def _cmd_features(args) -> int:
     return 0
 
 
-def _cmd_report(args) -> int:
-    from .report import write_report
-
+def _report_name(args, suffixes: tuple[str, ...], fix: str) -> str:
+    """The base name of the one report in args.out (or args.name), its files with these suffixes present."""
     names = [args.name] if args.name else sorted(p.name[:-len(".report.json")] for p in args.out.glob("*.report.json"))
     if len(names) != 1:
         raise JobError("no report here" if not names else f"several reports here: {', '.join(names)}",
                        where=str(args.out), fix="give the output folder of 'fuzzymesh mesh'"
                        + ("" if not names else " and --name NAME"))
     name = names[0]
-    for suffix in (".vtu", ".audit.json", ".report.json"):
+    for suffix in suffixes:
         if not (args.out / f"{name}{suffix}").is_file():
-            raise JobError(f"'{name}{suffix}' is missing", where=str(args.out),
-                           fix="mesh again with 'vtu' among output.formats")
-    for path in write_report(args.out, name, args.cut):
+            raise JobError(f"'{name}{suffix}' is missing", where=str(args.out), fix=fix)
+    return name
+
+
+def _cmd_report(args) -> int:
+    from .report import write_report
+
+    for path in write_report(args.out, _report_name(args, (".vtu", ".audit.json", ".report.json"),
+                                                     "mesh again with 'vtu' among output.formats"), args.cut):
         print(f"wrote {path}")
+    return 0
+
+
+def _cmd_view(args) -> int:
+    import webbrowser
+
+    name = _report_name(args, (".report.html",), "rebuild it: fuzzymesh report OUT")
+    page = (args.out / f"{name}.report.html").resolve()
+    if not webbrowser.open(page.as_uri()):
+        raise FuzzymeshError("no web browser could be started", fix=f"open {page} in a browser")
+    print(f"opened {page}")
     return 0
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
+from .exact import curve_surfaces, exact_surfaces, onto_intersection
 from .mesh import FACES, NODE_LEVELS, TetMesh
 from .meshing.surface import arc_parameter
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
@@ -173,10 +174,11 @@ def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tup
 def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
 
-    Mid-edge nodes of boundary edges are moved onto the input surface (onto
-    their feature curve for sharp curves' edges); where an element's scaled
-    Jacobian would fall below QUADRATIC_FLOOR its mid-edge nodes move only part
-    of the way (:func:`limit_curving`).
+    Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
+    (:mod:`engine.exact`: a plane, cylinder or sphere), else onto the input surface; a curve's chords onto
+    the exact intersection of the patches it borders, else onto the curve (a sharp one) or the input surface
+    (a smooth cut). Where an element's scaled Jacobian would fall below QUADRATIC_FLOOR its mid-edge nodes
+    move only part of the way (:func:`limit_curving`).
     """
     unique, tets10, triangles6 = quadratic_elements(mesh)
     straight = mesh.points[unique].mean(axis=1)
@@ -184,13 +186,23 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
     on_boundary = np.unique(triangles6[:, 3:]) - len(mesh.points)
     if len(on_boundary):
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
+    surfaces = exact_surfaces(geometry, features)
+    patch = tet_boundary(mesh)[2]     # the patch of each triangle6, in its order
+    for p in np.unique(patch[patch >= 0]):
+        if surfaces[p] is not None:
+            rows = np.unique(triangles6[patch == p, 3:]) - len(mesh.points)
+            curved[rows] = surfaces[p].project(straight[rows])
+    along = curve_surfaces(geometry, features, surfaces)
     chords, curve = curve_edges(mesh, features, triangles6[:, :3])
     chord_row = row_index(unique, np.sort(chords, axis=1))
-    for c in np.unique(curve):    # a smooth cut's chords are curved onto the surface, like a patch's
-        if not features.curves[c].sharp:
-            continue
+    for c in np.unique(curve):
         rows = chord_row[(curve == c) & (chord_row >= 0)]
-        curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
+        if along[c]:
+            curved[rows] = onto_intersection(along[c], straight[rows])
+        elif features.curves[c].sharp:
+            curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
+        else:                         # a smooth cut's chords are curved onto the surface, like a patch's
+            curved[rows] = geometry.closest_point(straight[rows])[0]
     points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10)
     return points, tets10, triangles6
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .acceptance import check_mesh
+from .exact import on_exact_surfaces
 from .errors import JobError, LimitError, MeshRejected
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
@@ -172,6 +173,13 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)", job.mesher,
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
              100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])
+    with stage("exact", timings):
+        mesh, moved = on_exact_surfaces(mesh, geometry, features)
+    log.info("exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder or sphere; %d nodes moved "
+             "onto them, at most %.3g%s (%.2f s)", moved["exact_patches"], moved["patches"], moved["exact_curves"],
+             moved["curves"], moved["nodes_moved"], moved["largest_move"],
+             f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
+             if moved["nodes_kept_for_validity"] else "", timings["exact"])
     with stage("quality", timings):
         elements = tet_quality(mesh.points, mesh.tets)
         quality = elements.summary()

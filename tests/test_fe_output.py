@@ -11,10 +11,11 @@ import pytest
 import yaml
 
 from engine.cli import main
-from engine.fe import TET10_EDGES, curve_edges, feature_groups, quadratic, row_index
+from engine.exact import CylinderSurface, curve_surfaces, exact_surfaces
+from engine.fe import TET10_EDGES, curve_edges, feature_groups, quadratic, row_index, tet_boundary
 from engine.io import ABAQUS_FACE
 from engine.mesh import NODE_LEVELS
-from engine.meshing.surface import arc_parameter
+from engine.shapes import CHORDAL_ERROR
 from engine.quadratic import QUADRATIC_FLOOR, _gradients, scaled_jacobian
 from test_meshers import meshed, packed
 
@@ -81,21 +82,26 @@ def test_quadratic_tets_are_above_the_floor_and_curved_on_the_boundary():
     points, tets10, triangles6 = quadratic(mesh, geometry, features)
     assert tets10.shape == (len(mesh.tets), 10) and triangles6.shape == (len(mesh.boundary), 6)
     assert scaled_jacobian(points, tets10).min() >= QUADRATIC_FLOOR
-    middle = np.unique(triangles6[:, 3:])
-    _, distance, _ = geometry.closest_point(points[middle])
-    assert np.mean(distance < 1e-9 * geometry.scale) > 0.99, "boundary mid-edge nodes on the input surface"
-    assert distance.max() < 0.05 * geometry.scale / 40, "the rest moved part of the way"
-    # mid-edge nodes on the junction circle lie on the curve
+    # boundary mid-edge nodes on the exact plane or cylinder of their patch, not on its facets
+    surfaces = exact_surfaces(geometry, features)
+    assert all(s is not None for s in surfaces), "the junction's patches are planes and a cylinder"
+    patch = tet_boundary(mesh)[2]
+    off = np.concatenate([np.linalg.norm(surfaces[p].project(points[m]) - points[m], axis=1)
+                          for p in np.unique(patch) for m in [np.unique(triangles6[patch == p, 3:])]])
+    assert np.mean(off < 1e-9 * geometry.scale) > 0.99, "boundary mid-edge nodes on the exact surfaces"
+    _, distance, _ = geometry.closest_point(points[np.unique(triangles6[:, 3:])])
+    radius = max(s.radius for s in surfaces if isinstance(s, CylinderSurface))
+    assert distance.max() < 1.01 * CHORDAL_ERROR * radius, "within the faceting's sagitta of the input"
+    # mid-edge nodes of the junction lie on the exact circle: on the cylinder and on the plate's top plane
     junction = features.curves.index(features.named("junction")[0])
-    edge_groups = [g for g in feature_groups(mesh, features) if g.name == "junction"]
-    (group,) = edge_groups
-    curve = features.curves[junction]
+    (group,) = [g for g in feature_groups(mesh, features) if g.name == "junction"]
     edges = np.sort(group.cells, axis=1)
     tet_edges = np.sort(tets10[:, [[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]]].reshape(-1, 2), axis=1)
-    mids = tets10[:, 4:].reshape(-1)
-    lookup = {tuple(e): m for e, m in zip(tet_edges.tolist(), mids.tolist())}
+    lookup = {tuple(e): m for e, m in zip(tet_edges.tolist(), tets10[:, 4:].reshape(-1).tolist())}
     on = points[[lookup[tuple(e)] for e in edges.tolist()]]
-    off = np.linalg.norm(curve.point_at(arc_parameter(curve, on)) - on, axis=1)
+    circle = curve_surfaces(geometry, features, surfaces)[junction]
+    assert len(circle) == 2
+    off = np.max([np.linalg.norm(s.project(on) - on, axis=1) for s in circle], axis=0)
     assert np.mean(off < 1e-9 * geometry.scale) > 0.9, "mid-edge nodes of the junction on the circle"
     assert (mesh.node_level[np.unique(edges)] <= NODE_LEVELS.index("curve")).all()
 

@@ -1,7 +1,7 @@
 """Linear elasticity with quadratic tetrahedra (scikit-fem) on a fuzzymesh mesh.
 
-The model is the mesh's 10-node form (``engine.fe.quadratic_elements``, the nodes of curved patches
-on their exact surfaces: see :func:`build`) as a curved scikit-fem ``MeshTet2`` with
+The model is the mesh's 10-node form as ``fuzzymesh mesh`` writes it (``engine.fe.quadratic``: the nodes of
+planes, cylinders and spheres on their exact surfaces) as a curved scikit-fem ``MeshTet2`` with
 ``ElementVector(ElementTetP2())``: isoparametric quadratic tetrahedra. Boundary conditions are applied
 by patch and corner names, through the mesh's boundary triangles tagged by patch, never by coordinates.
 The system is solved by conjugate gradients preconditioned with smoothed-aggregation algebraic multigrid
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fe import CORNER, limit_curving, quadratic_elements, row_index
+from ..fe import CORNER, quadratic, row_index
 
 QUADRATURE_ORDER = 2    # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
 TOLERANCE = 1e-10       # relative residual of the conjugate gradients
@@ -103,44 +103,14 @@ def _patches(result, name: str) -> list[int]:
     return index
 
 
-def on_cylinder(point, axis, radius: float):
-    """Projection onto the cylinder through ``point`` along ``axis`` (radial, keeping the axial position)."""
-    point, axis = np.asarray(point, float), np.asarray(axis, float) / np.linalg.norm(axis)
-
-    def project(x):
-        along = np.outer((x - point) @ axis, axis)
-        radial = x - point - along
-        return point + along + radius * radial / np.linalg.norm(radial, axis=1, keepdims=True)
-    return project
-
-
-def on_sphere(centre, radius: float):
-    """Projection onto the sphere (radial from the centre)."""
-    centre = np.asarray(centre, float)
-
-    def project(x):
-        return centre + radius * (x - centre) / np.linalg.norm(x - centre, axis=1, keepdims=True)
-    return project
-
-
-def build(result, exact: dict) -> Model:
-    """The quadratic model of a pipeline result (``engine.pipeline.run``).
-
-    The 10-node elements are ``engine.fe.quadratic_elements``; their mid-edge nodes are the edges' midpoints,
-    except that every node of a patch named in ``exact`` (name -> projection onto the patch's exact
-    surface, points (k, 3) -> (k, 3)) is moved onto that surface. The input surface is faceted (up to
-    0.1 % of a radius off the true one), about as far as a quadratic edge's mid-node lies off its chord
-    (h^2 / 8 R): quadratic faces on the facets could have their curvature wrong by tens of percent.
+def build(result) -> Model:
+    """The quadratic model of a pipeline result (``engine.pipeline.run``): exactly the 10-node elements
+    ``fuzzymesh mesh`` writes at order 2 (``engine.fe.quadratic``: mid-edge nodes of planes, cylinders and
+    spheres on the exact surfaces, like the vertices), no private snapping.
     """
     from skfem import Basis, ElementTetP2, ElementVector, MeshTet2
 
-    edges, tets10, triangles6 = quadratic_elements(result.mesh)
-    straight = np.vstack([result.mesh.points, result.mesh.points[edges].mean(axis=1)])
-    on_surface = straight.copy()
-    for name, project in exact.items():
-        nodes = np.unique(triangles6[np.isin(result.mesh.boundary_patch, _patches(result, name))])
-        on_surface[nodes] = project(straight[nodes])
-    points = limit_curving(straight, on_surface, tets10)
+    points, tets10, triangles6 = quadratic(result.mesh, result.geometry, result.features)
     mesh = MeshTet2(np.ascontiguousarray(points.T), np.ascontiguousarray(tets10.T))
     basis = Basis(mesh, ElementVector(ElementTetP2()), intorder=QUADRATURE_ORDER)
     dof = np.empty(len(points), np.int64)

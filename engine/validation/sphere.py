@@ -21,7 +21,7 @@ import numpy as np
 from ..job import job_from_dict
 from ..pipeline import run as mesh_job
 from . import CaseResult, Row
-from .elasticity import Material, build, on_sphere, displacement, nodal_stress, solve, stiffness, surface_load
+from .elasticity import Material, build, displacement, nodal_stress, solve, stiffness, surface_load
 
 MATERIAL = Material(E=200e3, nu=0.3)     # MPa
 PRESSURE = 100.0                          # MPa on the inner surface
@@ -47,7 +47,7 @@ def job(scale: float = 1.0, seed: int = 0) -> dict:
 def solve_sphere(result) -> dict:
     """Solve the octant of a pipeline result; displacement and stresses at the inner and outer nodes."""
     start = time.perf_counter()
-    model = build(result, exact={"inner": on_sphere([0, 0, 0], INNER), "outer": on_sphere([0, 0, 0], OUTER)})
+    model = build(result)
     K = stiffness(model, MATERIAL)
     f = surface_load(model, ("inner",), lambda n: (-PRESSURE * n[0], -PRESSURE * n[1], -PRESSURE * n[2]))
     fixed = np.concatenate([model.dofs(model.patch_nodes(f"symmetry-{axis}"), k) for k, axis in enumerate("xyz")])

@@ -1,0 +1,105 @@
+"""Exact surfaces (engine/exact.py, issue 15 item 1): the nodes and 10-node mid-edge nodes that `fuzzymesh mesh`
+writes lie on the planes, cylinders and spheres of the solid, not on its facets, and `fuzzymesh validate`
+solves on exactly those nodes."""
+from __future__ import annotations
+
+import math
+
+import meshio
+import numpy as np
+import pytest
+import yaml
+
+from engine.cli import main
+from engine.exact import CylinderSurface, Plane, Sphere, fit_surface, onto_intersection
+from engine.shapes import CHORDAL_ERROR
+
+RADIUS = 12.0
+
+
+def _ring(radius: float, z: float, n: int = 72) -> np.ndarray:
+    angle = np.linspace(0, 2 * math.pi, n, endpoint=False)
+    return np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(n, z)])
+
+
+def test_fits_recognise_planes_cylinders_and_spheres_and_nothing_else():
+    tolerance = 1e-9
+    cylinder_vertices = np.vstack([_ring(3.0, 0.0), _ring(3.0, 5.0)])
+
+    class Axis:
+        axis = np.array([0.0, 0.0, 1.0])
+
+    cylinder = fit_surface(cylinder_vertices, False, Axis, tolerance)
+    assert isinstance(cylinder, CylinderSurface) and cylinder.radius == pytest.approx(3.0, abs=1e-12)
+    plane = fit_surface(_ring(3.0, 2.0), True, None, tolerance)
+    assert isinstance(plane, Plane) and abs(plane.normal[2]) == pytest.approx(1.0)
+    rng = np.random.default_rng(0)
+    directions = rng.normal(size=(200, 3))
+    sphere = fit_surface(5.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True) + [1, 2, 3], False,
+                         None, tolerance)
+    assert isinstance(sphere, Sphere) and sphere.radius == pytest.approx(5.0) and np.allclose(sphere.centre, [1, 2, 3])
+    # a torus is none of them: its patch keeps the facets
+    u, v = rng.uniform(0, 2 * math.pi, (2, 300))
+    torus = np.column_stack([(10 + 2 * np.cos(v)) * np.cos(u), (10 + 2 * np.cos(v)) * np.sin(u), 2 * np.sin(v)])
+    assert fit_surface(torus, False, None, tolerance) is None
+    assert fit_surface(cylinder_vertices + rng.normal(scale=1e-3, size=cylinder_vertices.shape), False, Axis,
+                       tolerance) is None
+
+
+def test_a_circle_is_the_intersection_of_its_cylinder_and_plane():
+    cylinder = CylinderSurface(np.zeros(3), np.array([0.0, 0, 1]), 4.0)
+    plane = Plane(np.array([0.0, 0, 1]), np.array([0.0, 0, 1]))
+    on = onto_intersection([cylinder, plane], np.array([[3.0, 1.0, 1.3], [0.0, -5.0, 0.7]]))
+    assert np.allclose(np.linalg.norm(on[:, :2], axis=1), 4.0) and np.allclose(on[:, 2], 1.0)
+
+
+def _mesh(tmp_path, geometry: dict, size: float, order: int = 2) -> meshio.Mesh:
+    job = tmp_path / "job.yaml"
+    job.write_text(yaml.safe_dump({"geometry": geometry, "size": size,
+                                   "output": {"directory": "out", "formats": ["msh"], "order": order}}))
+    assert main(["mesh", str(job), "--quiet"]) == 0
+    return meshio.read(tmp_path / "out" / "mesh.msh")
+
+
+def _group_nodes(mesh: meshio.Mesh, name: str) -> np.ndarray:
+    """The nodes of the boundary faces (triangles or triangle6) of the patch named ``name`` (its physical
+    group is ``name-surface`` where curves share the name)."""
+    tag = mesh.field_data[name if name in mesh.field_data else f"{name}-surface"][0]
+    return np.unique(np.concatenate([block.data[tags == tag] for block, tags in
+                                     zip(mesh.cells, mesh.cell_data["gmsh:physical"])
+                                     if block.type.startswith("triangle")]))
+
+
+def test_the_hole_of_a_plate_is_a_circle_in_the_written_mesh(tmp_path):
+    """The issue's plate: every hole node, vertex and mid-edge node, on the circle (the shape's faceting is
+    up to CHORDAL_ERROR x R inside it; the nodes were there, up to 9.5e-4 R, before)."""
+    parameters = {"length": 400, "width": 100, "thickness": 5, "hole_radius": RADIUS}
+    mesh = _mesh(tmp_path, {"shape": "plate_with_hole", "parameters": parameters}, 8.0)
+    hole = mesh.points[_group_nodes(mesh, "hole")]
+    radial = np.linalg.norm(hole[:, :2], axis=1)
+    assert len(hole) > 50
+    assert np.abs(radial - RADIUS).max() < 1e-6 * RADIUS < 1e-2 * CHORDAL_ERROR * RADIUS
+
+
+def test_the_sphere_nodes_are_on_the_spheres(tmp_path):
+    mesh = _mesh(tmp_path, {"shape": "hollow_sphere_octant"}, 12.0)
+    for name in ("inner", "outer"):
+        nodes = mesh.points[_group_nodes(mesh, name)]
+        radius = np.linalg.norm(nodes, axis=1)
+        assert np.ptp(radius) < 1e-6 * radius.mean(), name
+
+
+def test_validate_solves_on_the_written_nodes():
+    """No private snapping: the validation model's nodes are those of engine.fe.quadratic."""
+    pytest.importorskip("skfem")
+    from engine.fe import quadratic
+    from engine.job import job_from_dict
+    from engine.pipeline import run
+    from engine.validation.elasticity import build
+
+    job = job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 20.0, "output": {"order": 2}},
+                        base_dir=".", source="<test>")
+    result = run(job, write=False)
+    points, tets10, _ = quadratic(result.mesh, result.geometry, result.features)
+    model = build(result)
+    assert np.array_equal(model.points, points) and np.array_equal(model.tets10, tets10)
