@@ -1,6 +1,7 @@
-"""The mesh report: ``<name>.report.json`` (figures) and a self-contained ``<name>.report.html`` (tables and
-PNG plots embedded as data URIs): element quality histograms, the size-conformity histogram, a cut through
-the mesh coloured by winning pattern and by element quality, stage timings and counts.
+"""The mesh report: ``<name>.report.json`` (figures) and a self-contained ``<name>.report.html``: an interactive
+3-D view of the mesh with the audit of the element under the pointer (plotly.js, inlined), two cuts through the
+most refined region coloured by winning pattern, target size and quality, element quality histograms, the
+size-conformity histogram, stage timings and counts (PNG plots embedded as data URIs). See docs/report.md.
 
 Everything the HTML shows is rebuilt from the written files (the VTU with its audit fields, the audit
 legend and the report JSON), so ``fuzzymesh report OUT`` regenerates it without meshing again.
@@ -11,13 +12,17 @@ import base64
 import html
 import io
 import json
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .mesh import FACES
 from .quality import EDGES, tet_quality
 
 FORMAT = "fuzzymesh-report/1"
+VIEW_FACES = 200_000    # the 3-D view holds at most this many distinct element faces (about 2 per element)
 
 
 def report_summary(result) -> dict:
@@ -38,7 +43,8 @@ def report_summary(result) -> dict:
 def write_report(directory: Path, name: str, cut: tuple[int, float] | None = None) -> list[Path]:
     """(Re)write ``name.report.html`` in ``directory`` from the saved VTU, audit legend and report JSON.
 
-    ``cut`` = (axis 0/1/2, value) places the cut plane x[axis] = value; None chooses it (see ``_cuts``).
+    ``cut`` = (axis 0/1/2, value) draws the one cut x[axis] = value; None, the two through the finest element
+    (see ``finest``).
     """
     import meshio
 
@@ -63,11 +69,15 @@ def write_report(directory: Path, name: str, cut: tuple[int, float] | None = Non
 
 def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarray, cells: dict,
                 cut: tuple[int, float] | None = None) -> str:
+    """The report page (see the module doc)."""
     quality = tet_quality(points, tets)
+    focus = finest(points, tets, cells)
+    planes = [cut] if cut is not None else focus.planes
     plots = {
         "Element quality": _quality_histograms(quality),
         "Size conformity": _conformity_histogram(summary["size_conformity"]),
-        "Cut through the mesh": _cuts(points, tets, cells, legend, quality, cut),
+        **{f"Cut at {'xyz'[axis]} = {value:.4g}": _cut(points, tets, cells, legend, quality, axis, value, focus)
+           for axis, value in planes},
         "Stage timings": _timings(summary["timings"]),
     }
     q, c, b = summary["quality"], summary["size_conformity"], summary.get("boundary", {})
@@ -76,6 +86,8 @@ def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarra
         ("bubbles / nodes / tetrahedra", f"{summary['counts']['bubbles']:,} / {summary['counts']['nodes']:,} / "
                                          f"{summary['counts']['tetrahedra']:,}"),
         ("volume", f"{summary['volume']['mesh']:.6g} ({100 * (summary['volume']['mesh'] / summary['volume']['solid'] - 1):+.3f} % of the solid)"),
+        ("finest target size", f"h = {cells['h_target'][focus.element]:.4g} at ({', '.join(f'{x:.4g}' for x in focus.point)}), "
+                               f"{_placed_by(legend, cells, focus.element)}"),
         ("min dihedral angle", f"{q['min_dihedral']['min']:.2f}° (1st percentile {q['min_dihedral']['p01']:.2f}°); "
                                f"{q['below']['min_dihedral_10']} below 10°, {q['below']['min_dihedral_5']} below 5°"),
         ("max dihedral angle", f"{q['max_dihedral']['max']:.2f}°; {q['below']['max_dihedral_165']} above 165°"),
@@ -89,7 +101,7 @@ def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarra
                      f"{'two-manifold' if b['two_manifold'] else 'NOT two-manifold'}, {b['boundary_edges']} open edges; "
                      f"Hausdorff to the input max {b['hausdorff_input_to_mesh']['max']:.4g}, "
                      f"mean {b['hausdorff_input_to_mesh']['mean']:.4g}"))
-    patterns = [(p["id"], p["pattern"], p.get("feature") or "", p["placement"],
+    patterns = [(p["id"], p["pattern"], _feature_name(legend, p), p["placement"],
                  f"{100 * np.mean(cells['winner'] == p['index']):.1f} %") for p in legend["patterns"]]
     table = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows)
     pattern_rows = "".join("<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in row) + "</tr>"
@@ -103,8 +115,53 @@ th,td{{border:1px solid #ccc;padding:4px 8px;text-align:left}}img{{max-width:100
 <body><h1>fuzzymesh report</h1><table>{table}</table>
 <h2>Which pattern sized the elements</h2>
 <table><tr><th>placed pattern</th><th>pattern</th><th>feature</th><th>placed at</th><th>elements</th></tr>{pattern_rows}</table>
+{view_section(points, tets, cells, quality, legend, focus)}
 {figures}</body></html>
 """
+
+
+@dataclass
+class Finest:
+    """The finest element: of the elements whose target size is within 1 % of the smallest (the most refined
+    region), the one nearest the region's middle; and two cut planes (axis, value) through its centroid, normal
+    to the axes along which it and that middle agree best."""
+
+    element: int
+    point: np.ndarray
+    planes: list[tuple[int, float]]
+
+
+def finest(points: np.ndarray, tets: np.ndarray, cells: dict) -> Finest:
+    """See :class:`Finest`."""
+    h = cells["h_target"]
+    centroids = points[tets].mean(axis=1)
+    region = np.flatnonzero(h <= 1.01 * h.min())
+    middle = centroids[region].mean(axis=0)
+    element = int(region[np.argmin(np.linalg.norm(centroids[region] - middle, axis=1))])
+    point = centroids[element]
+    off = np.abs(point - middle) / np.maximum(np.ptp(points, axis=0), 1e-300)
+    return Finest(element, point, [(int(axis), float(point[axis])) for axis in np.argsort(off, kind="stable")[:2]])
+
+
+def _feature_name(legend: dict, pattern: dict) -> str:
+    """'curve-8 (junction)': the feature a placed pattern is bound to, with its names."""
+    feature = pattern.get("feature")
+    if not feature:
+        return ""
+    kind = {"corner": "corners", "curve": "curves", "patch": "patches"}.get(feature.split("-")[0])
+    names = next((f["names"] for f in legend.get(kind, []) if f["id"] == feature), []) if kind else []
+    return f"{feature} ({', '.join(names)})" if names else feature
+
+
+def _placed_by(legend: dict, cells: dict, element: int) -> str:
+    """Which placed pattern, feature and zone sized an element."""
+    winner = int(cells["winner"][element])
+    if winner < 0:
+        return "no pattern: the global size"
+    p = legend["patterns"][winner]
+    zone = legend["zones"][int(cells["zone"][element])]
+    on = _feature_name(legend, p)
+    return f"placed by {p['id']} (pattern '{p['pattern']}'{', on ' + on if on else ''}, zone '{zone['id']}' {zone['source']})"
 
 
 def _png(figure) -> str:
@@ -168,39 +225,43 @@ def cut_polygons(points: np.ndarray, tets: np.ndarray, axis: int, value: float):
     return crossing, np.take_along_axis(at, order[..., None], axis=1)
 
 
-def _cuts(points, tets, cells, legend, quality, cut=None) -> str:
-    """The plane x[axis] = value of ``cut``; by default the one holding the longest and shortest extents,
-    at the nodes' median."""
-    from matplotlib.collections import PolyCollection
+PALETTE = ("#4477aa", "#ee6677", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#bbbbbb")   # winning patterns
 
-    if cut is None:
-        axis = int(np.argsort(np.ptp(points, axis=0))[1])
-        value = float(np.median(points[:, axis]))
-    else:
-        axis, value = int(cut[0]), float(cut[1])
+
+def _cut(points, tets, cells, legend, quality, axis: int, value: float, focus: Finest) -> str:
+    """The plane x[axis] = value in three panels: winning pattern, target size, element quality; the finest
+    element marked with a cross."""
+    from matplotlib.collections import PolyCollection
+    from mpl_toolkits.axes_grid1 import make_axes_locatable
+
     crossing, polygons = cut_polygons(points, tets, axis, value)
-    figure, axes = _figure(2, 6.0, 5.0)
+    other = [i for i in range(3) if i != axis]
+    extent = np.ptp(points[:, other], axis=0)
+    figure, axes = _figure(3, 5.0, 0.5 + 5.0 * min(max(extent[1] / extent[0], 0.3), 1.5))
+    figure.subplots_adjust(wspace=0.4)
     winners = cells["winner"][crossing]
+    palette = np.array(PALETTE)
+    axes[0].add_collection(PolyCollection(polygons, facecolors=palette[np.mod(winners, len(palette))],
+                                          edgecolors="k", linewidths=0.1))
     names = {p["index"]: p["id"] for p in legend["patterns"]}
-    palette = np.array(["#4477aa", "#ee6677", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#bbbbbb"])
-    colours = palette[np.mod(winners, len(palette))]
-    axes[0].add_collection(PolyCollection(polygons, facecolors=colours, edgecolors="k", linewidths=0.1))
     for index in np.unique(winners):
         axes[0].plot([], [], "s", color=palette[index % len(palette)], label=names.get(int(index), "none"))
-    axes[0].legend(fontsize=7, loc="upper right")
+    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     axes[0].set_title("winning pattern")
-    cut = PolyCollection(polygons, array=quality.min_dihedral[crossing], cmap="viridis", edgecolors="k",
-                         linewidths=0.1)
-    axes[1].add_collection(cut)
-    figure.colorbar(cut, ax=axes[1], label="minimum dihedral angle (°)")
-    axes[1].set_title("element quality")
-    labels = "xyz"
+    for ax, values, title, cmap in ((axes[1], cells["h_target"][crossing], "target size h_target", "viridis"),
+                                    (axes[2], quality.min_dihedral[crossing], "minimum dihedral angle (°)", "magma")):
+        collection = PolyCollection(polygons, array=values, cmap=cmap, edgecolors="k", linewidths=0.1)
+        ax.add_collection(collection)
+        bar = make_axes_locatable(ax).append_axes("right", size="4%", pad=0.06)   # as tall as its plot
+        figure.colorbar(collection, cax=bar)
+        ax.set_title(title)
     for ax in axes:
-        ax.autoscale()
+        ax.set_xlim(points[:, other[0]].min(), points[:, other[0]].max())
+        ax.set_ylim(points[:, other[1]].min(), points[:, other[1]].max())
         ax.set_aspect("equal")
-        ax.set_xlabel(labels[[i for i in range(3) if i != axis][0]])
-        ax.set_ylabel(labels[[i for i in range(3) if i != axis][1]])
-    figure.suptitle(f"cut at {labels[axis]} = {value:.4g}")
+        ax.plot(*focus.point[other], "+", color="#cc3311", markersize=12, markeredgewidth=2)
+        ax.set_xlabel("xyz"[other[0]])
+        ax.set_ylabel("xyz"[other[1]])
     return _png(figure)
 
 
@@ -211,3 +272,75 @@ def _timings(timings: dict) -> str:
     axis.invert_yaxis()
     axis.set_xlabel("seconds")
     return _png(figure)
+
+
+def neighbours(tets: np.ndarray) -> np.ndarray:
+    """(m, 4): the element across face k of each element (face k opposite vertex k), -1 on the boundary."""
+    faces = np.sort(tets[:, FACES].reshape(-1, 3), axis=1)
+    order = np.lexsort(faces.T[::-1])
+    same = np.flatnonzero((faces[order[1:]] == faces[order[:-1]]).all(axis=1))
+    across = np.full(len(faces), -1, dtype=np.int64)
+    across[order[same]], across[order[same + 1]] = order[same + 1] // 4, order[same] // 4
+    return across.reshape(-1, 4)
+
+
+def view_section(points, tets, cells, quality, legend, focus: Finest) -> str:
+    """The interactive 3-D view: plotly.js and the mesh, each gzipped and base64-encoded into the page (no
+    network when viewed), and engine/report_view.js, which draws the elements on one side of a movable plane
+    and shows the audit of the element under the pointer."""
+    from plotly.offline import get_plotlyjs
+
+    keep, note = _view_elements(points, tets, focus)
+    used, local = np.unique(tets[keep], return_inverse=True)
+    across = neighbours(tets[keep])      # an element dropped from the view is the boundary of the view
+    arrays = {"points": points[used].astype(np.float32), "tets": local.reshape(-1, 4).astype(np.int32),
+              "neighbours": across.astype(np.int32), "element": keep.astype(np.int32),
+              "quality": quality.min_dihedral[keep].astype(np.float32),
+              **{name: cells[name][keep].astype(np.float32 if cells[name].dtype.kind == "f" else np.int16)
+                 for name in ("h_target", "h_actual", "size_ratio", "winner", "winner_mu", "runner_up",
+                              "runner_up_mu", "graded", "gradation", "zone")}}
+    header, blob = {}, b""
+    for name, values in arrays.items():
+        header[name] = [len(blob), values.dtype.str[1:], values.size]
+        blob += values.tobytes()
+    meta = {"arrays": header, "palette": PALETTE, "focus": [focus.planes[0][0], focus.planes[0][1]],
+            "patterns": [{"id": p["id"], "pattern": p["pattern"], "feature": _feature_name(legend, p),
+                          "placed": legend["placements"][p["placement_index"]]["source"]} for p in legend["patterns"]],
+            "zones": [{"id": z["id"], "source": z["source"]} for z in legend["zones"]],
+            "gradation_limit": legend["gradation_limit"]}
+    script = Path(__file__).with_name("report_view.js").read_text()
+    meta_json = json.dumps(meta).replace("</", "<\\/")     # no '</script>' inside the script element
+    return f"""<h2>3-D view</h2>
+<p>{html.escape(note)} Drag to turn, scroll to zoom; the slider moves the cut (the elements whose centroid lies
+on the kept side are drawn whole); hover over or click an element for its audit.</p>
+<div id="view-controls">colour by <select id="view-colour"><option value="winner">winning pattern</option>
+<option value="h_target" selected>target size h_target</option><option value="size_ratio">size ratio
+h_actual / h_target</option><option value="quality">minimum dihedral angle (°)</option></select>
+cut <select id="view-axis"><option>x</option><option>y</option><option>z</option></select>
+<input id="view-cut" type="range" min="0" max="1000" value="1000" style="width:20em">
+<select id="view-side"><option value="1">keep below</option><option value="-1">keep above</option></select>
+<span id="view-legend"></span></div>
+<div id="view" style="width:100%;height:640px"></div>
+<pre id="view-audit" style="white-space:pre-wrap;background:#f4f4f4;padding:6px;min-height:8em">loading the 3-D view…</pre>
+<script type="application/json" id="view-meta">{meta_json}</script>
+<script type="application/octet-stream" id="view-mesh">{_packed(blob)}</script>
+<script type="application/octet-stream" id="view-plotly">{_packed(get_plotlyjs().encode())}</script>
+<script>{script}</script>"""
+
+
+def _packed(data: bytes) -> str:
+    return base64.b64encode(zlib.compress(data, 9, wbits=31)).decode("ascii")   # wbits 31: the gzip format
+
+
+def _view_elements(points, tets, focus: Finest) -> tuple[np.ndarray, str]:
+    """The elements the view holds and a sentence that says which: all of them, or, when their faces (about 2
+    per element) exceed VIEW_FACES, the ones nearest the finest element."""
+    faces = 2 * len(tets)
+    if faces <= VIEW_FACES:
+        return np.arange(len(tets)), f"All {len(tets):,} elements."
+    count = VIEW_FACES // 2
+    distance = np.linalg.norm(points[tets].mean(axis=1) - focus.point, axis=1)
+    keep = np.sort(np.argpartition(distance, count)[:count])
+    return keep, (f"Reduced for the view: the mesh has {len(tets):,} elements (about {faces:,} faces, more than "
+                  f"{VIEW_FACES:,}); the view holds the {count:,} nearest the finest element, within "
+                  f"{distance[keep].max():.4g} of ({', '.join(f'{x:.4g}' for x in focus.point)}).")
