@@ -171,14 +171,15 @@ def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tup
     return edges[keep], curve[keep]
 
 
-def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def quadratic(mesh: TetMesh, geometry, features,
+              floor: float = QUADRATIC_FLOOR) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
     (:mod:`engine.exact`: a plane, cylinder or sphere), else onto the input surface; a curve's chords onto
     the exact intersection of the patches it borders, else onto the curve (a sharp one) or the input surface
-    (a smooth cut). Where an element's scaled Jacobian would fall below QUADRATIC_FLOOR its mid-edge nodes
-    move only part of the way (:func:`limit_curving`).
+    (a smooth cut). Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
+    only part of the way (:func:`limit_curving`).
     """
     unique, tets10, triangles6 = quadratic_elements(mesh)
     straight = mesh.points[unique].mean(axis=1)
@@ -203,7 +204,7 @@ def quadratic(mesh: TetMesh, geometry, features) -> tuple[np.ndarray, np.ndarray
             curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
         else:                         # a smooth cut's chords are curved onto the surface, like a patch's
             curved[rows] = geometry.closest_point(straight[rows])[0]
-    points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10)
+    points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10, floor)
     return points, tets10, triangles6
 
 
