@@ -128,12 +128,17 @@ def describe_mesher_stats(stats: dict) -> str:
 
 
 def check_output_dir(job: Job) -> None:
-    """Refuse, before any work, an output folder that is a file or that cannot be created or written."""
+    """Refuse, before any work, an output folder that is a file or that cannot be created or written, and an
+    output file that is a folder."""
     directory = Path(job.output_dir)
     where = job.where("output", "directory")
     if directory.exists() and not directory.is_dir():
         raise JobError(f"the output folder '{directory}' is an existing file", where=where,
                        fix="name a folder (output.directory or --out)")
+    for target in (directory / f"{job.output_name}.{suffix}" for suffix in job.output_formats):
+        if target.is_dir():
+            raise JobError(f"the output file '{target}' is an existing folder", where=job.where("output", "name"),
+                           fix="remove it, or give another output.name or output folder")
     existing = next(p for p in (directory, *directory.parents) if p.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
         raise JobError(f"cannot write the output folder '{directory}': '{existing}' is not writable", where=where,

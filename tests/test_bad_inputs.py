@@ -32,7 +32,8 @@ from engine.cli import main
 
 ERROR_PREFIX = "fuzzymesh: error:"
 # lines the pipeline logs at INFO level while it works; anything else on stderr is suspect
-PROGRESS_LINE = re.compile(r"^(geometry|sizing|packing|meshing|quality|boundary|size conformity|audit|output|done)( \([\w-]+\)| (curve|patch|volume))?: ")
+PROGRESS_LINE = re.compile(r"^(geometry|sizing|packing|meshing|exact surfaces|quality|boundary|size conformity|audit|acceptance|output|done)"
+                           r"( \([\w-]+\)| (curve|patch|volume))?: ")
 MESH_SUFFIXES = {".vtu", ".msh"}
 SMALL = 2.5  # element size for the cube of side 10 in the cases that must mesh
 
@@ -609,8 +610,7 @@ def test_output_directory_is_a_file(capsys, tmp_path):
         output:
           directory: cube.obj
         """)
-    assert_refused(capsys, tmp_path, job, "cannot write", "writable output folder",
-                   where=str(tmp_path / "cube.obj" / "mesh.vtu"))
+    assert_refused(capsys, tmp_path, job, "is an existing file", "name a folder", where=f"{job}:5:3")
 
 
 def test_output_target_is_a_directory(capsys, tmp_path):
