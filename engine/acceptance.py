@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import MeshRejected
+from .quadratic import QUADRATIC_FLOOR
 
 KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invalid.* for inspection"
 
@@ -32,9 +33,9 @@ class Tolerances:
     """The gate's limits; see knowledge/sizing.yaml ``acceptance:``."""
 
     min_dihedral: float = 5.0         # degrees
-    volume: float = 0.01              # |V_mesh / V_input - 1|
+    volume: float = 0.02              # |V_mesh / V_input - 1|
     hausdorff: float = 0.25           # x the target size h, each direction
-    quadratic_jacobian: float = 0.2   # min scaled Jacobian of a 10-node tet
+    quadratic_jacobian: float = QUADRATIC_FLOOR   # min scaled Jacobian of a 10-node tet
 
 
 def boundary_topology(tets: np.ndarray) -> dict:

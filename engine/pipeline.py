@@ -24,6 +24,7 @@ from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
 from .report import report_summary
+from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
 from .shapes import build_shape
 from .sizing import SizingField, bind, check_element_limit
@@ -109,10 +110,12 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size, features)
 
 
-def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None) -> FEModel:
-    """The mesh as the files hold it: the job's element order, the bodies' and features' named groups, the
-    audit, and the cell field ``body`` (1-based)."""
-    quadratic_elements = quadratic(mesh, geometry, features) if job.output_order == 2 else None
+def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None,
+             floor: float = QUADRATIC_FLOOR) -> FEModel:
+    """The mesh as the files hold it: the job's element order (10-node elements curved no further than a
+    scaled Jacobian of ``floor``), the bodies' and features' named groups, the audit, and the cell field
+    ``body`` (1-based)."""
+    quadratic_elements = quadratic(mesh, geometry, features, floor) if job.output_order == 2 else None
     body = tet_bodies(mesh, geometry)
     model = FEModel.build(mesh, feature_groups(mesh, features, body), quadratic_elements, audit)
     model.cell_data["body"] = (body + 1).astype(np.int32)
@@ -222,10 +225,13 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
         log.warning(warning)
     result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit,
                     conformity=conformity, boundary=boundary, warnings=warnings)
-    model = fe_model(job, mesh, geometry, features, audit) if write or job.output_order == 2 else None
+    tolerances = kb.sizing["acceptance"]
+    model = fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian) \
+        if write or job.output_order == 2 else None
     with stage("acceptance", timings):
         try:
-            check_mesh(mesh, geometry, features, elements, boundary, kb.sizing["acceptance"])
+            check_mesh(mesh, geometry, features, elements, boundary, tolerances,
+                       scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None)
         except MeshRejected:
             if write and keep_invalid:
                 model.report = {**report_summary(result), "warnings": warnings}

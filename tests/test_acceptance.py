@@ -143,3 +143,20 @@ def test_the_exit_codes_are_documented():
 
     readme = (Path(__file__).parents[1] / "README.md").read_text()
     assert "exit code 4" in readme and "--keep-invalid" in readme
+
+
+def test_a_10_node_element_below_the_floor_is_refused(tmp_path):
+    """Order 2: the curving stops at the floor (acceptance.quadratic_jacobian), and the gate checks it."""
+    from engine.acceptance import check_mesh
+    from engine.quality import tet_quality
+
+    job = dataclasses.replace(load_job(_job(tmp_path, SMALL)), output_order=2)
+    result = run(job, write=False)
+    elements = tet_quality(result.mesh.points, result.mesh.tets)
+    tolerances = load_knowledge().sizing["acceptance"]
+    check_mesh(result.mesh, result.geometry, result.features, elements, result.boundary, tolerances,
+               np.full(len(result.mesh.tets), tolerances.quadratic_jacobian))
+    jacobians = np.ones(len(result.mesh.tets))
+    jacobians[7] = 0.5 * tolerances.quadratic_jacobian
+    with pytest.raises(MeshRejected, match="10-node element validity"):
+        check_mesh(result.mesh, result.geometry, result.features, elements, result.boundary, tolerances, jacobians)
