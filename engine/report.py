@@ -329,7 +329,9 @@ cut <select id="view-axis"><option>x</option><option>y</option><option>z</option
 
 
 def _packed(data: bytes) -> str:
-    return base64.b64encode(zlib.compress(data, 9, wbits=31)).decode("ascii")   # wbits 31: the gzip format
+    """Gzip at level 6, in base64. Level 9 took 2.3x as long (1.42 s against 0.62 s for plotly.js and the default
+    job's mesh) for 0.2 % less."""
+    return base64.b64encode(zlib.compress(data, wbits=31)).decode("ascii")   # wbits 31: the gzip format
 
 
 def _view_elements(points, tets, focus: Finest) -> tuple[np.ndarray, str]:
