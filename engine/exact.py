@@ -1,4 +1,5 @@
-"""Exact surfaces: the plane, cylinder or sphere that a patch's input vertices lie on, and nodes moved onto them.
+"""Exact surfaces: the plane, cylinder, sphere or cone that a patch's input vertices lie on, and nodes moved
+onto them.
 
 A faceted input (a built-in shape's faceting, an STL exported from CAD) puts its vertices on the true
 surface and its facets' insides off it, by up to the faceting's sagitta. A patch whose vertices all fit one
@@ -30,6 +31,10 @@ class Plane:
         """Closest points (k, 3) on the plane."""
         return x - np.outer((x - self.point) @ self.normal, self.normal)
 
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) at the closest points, up to sign."""
+        return np.broadcast_to(self.normal, x.shape)
+
 
 @dataclass(frozen=True)
 class CylinderSurface:
@@ -45,6 +50,12 @@ class CylinderSurface:
         length = np.linalg.norm(radial, axis=1, keepdims=True)
         return np.where(length > 0, foot + self.radius * radial / np.where(length > 0, length, 1), x)
 
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) at the closest points, up to sign."""
+        rel = x - self.point
+        radial = rel - np.outer(rel @ self.axis, self.axis)
+        return radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
+
 
 @dataclass(frozen=True)
 class Sphere:
@@ -57,10 +68,112 @@ class Sphere:
         length = np.linalg.norm(rel, axis=1, keepdims=True)
         return np.where(length > 0, self.centre + self.radius * rel / np.where(length > 0, length, 1), x)
 
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) at the closest points, up to sign."""
+        rel = x - self.centre
+        return rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300)
 
-def fit_surface(vertices: np.ndarray, planar: bool, cylinder, tolerance: float):
-    """The Plane, CylinderSurface or Sphere all ``vertices`` (k, 3) lie on within ``tolerance``, or None.
-    ``cylinder`` is the patch's fitted :class:`engine.features.Cylinder` (its axis), if any."""
+
+@dataclass(frozen=True)
+class Cone:
+    apex: np.ndarray
+    axis: np.ndarray      # unit, from the apex into the cone
+    angle: float          # half-angle, radians
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Closest points (k, 3) on the cone's nappe (the apex for points behind it); points on the axis
+        go to the generator in the direction of the first perpendicular."""
+        rel = x - self.apex
+        along = rel @ self.axis
+        radial = rel - np.outer(along, self.axis)
+        length = np.linalg.norm(radial, axis=1, keepdims=True)
+        fallback = np.cross(self.axis, np.eye(3)[np.argmin(np.abs(self.axis))])
+        unit = np.where(length > 0, radial / np.where(length > 0, length, 1), fallback / np.linalg.norm(fallback))
+        generator = np.cos(self.angle) * self.axis + np.sin(self.angle) * unit
+        t = np.maximum(np.einsum("ij,ij->i", rel, generator), 0.0)
+        return self.apex + t[:, None] * generator
+
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) at the closest points, up to sign: the generator turned by 90 degrees."""
+        rel = x - self.apex
+        radial = rel - np.outer(rel @ self.axis, self.axis)
+        unit = radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
+        return np.cos(self.angle) * unit - np.sin(self.angle) * self.axis
+
+
+def fit_cone(vertices: np.ndarray, normals: np.ndarray, centres: np.ndarray) -> Cone | None:
+    """The cone through a patch's ``vertices`` (k, 3), from its faces' ``normals`` and ``centres`` (f, 3), or
+    None. Every facet of a faceted cone spans two generators, so its plane holds the apex: the apex is the
+    least-squares point of the face planes. Seen from the apex the vertices make one angle with the axis:
+    their unit directions lie on a circle, whose plane's normal is the axis."""
+    spread = normals - normals.mean(axis=0)
+    singular = np.linalg.svd(spread, compute_uv=False)
+    if len(normals) < 6 or singular[1] < 1e-3 * len(normals) ** 0.5 or singular[2] > 0.05 * singular[0]:
+        return None     # one normal (a plane), or normals all round (a sphere): no cone
+    apex, *_ = np.linalg.lstsq(normals, np.einsum("ij,ij->i", normals, centres), rcond=None)
+    rel = vertices - apex
+    distance = np.linalg.norm(rel, axis=1)
+    directions = rel[distance > 0] / distance[distance > 0, None]
+    if len(directions) < 3:
+        return None
+    axis = np.linalg.svd(directions - directions.mean(axis=0), full_matrices=False)[2][2]
+    if (directions @ axis).mean() < 0:
+        axis = -axis
+    angle = float(np.arccos(np.clip(np.median(directions @ axis), -1, 1)))
+    if not 0 < angle < np.pi / 2:
+        return None
+    return _refined(Cone(apex, axis, angle), vertices)
+
+
+def _refined(cone: Cone, vertices: np.ndarray) -> Cone:
+    """The cone's apex, axis and angle adjusted by least squares (scipy) to the vertices' distances from it:
+    a tessellation whose triangles do not each span two generators puts the planes' apex a little off."""
+    from scipy.optimize import least_squares
+
+    def unpack(x):
+        axis = np.array([np.sin(x[3]) * np.cos(x[4]), np.sin(x[3]) * np.sin(x[4]), np.cos(x[3])])
+        return x[:3], axis, x[5]
+
+    def distances(x):
+        apex, axis, angle = unpack(x)
+        rel = vertices - apex
+        along = rel @ axis
+        across = np.linalg.norm(rel - np.outer(along, axis), axis=1)
+        return across * np.cos(angle) - along * np.sin(angle)
+
+    start = np.r_[cone.apex, np.arccos(np.clip(cone.axis[2], -1, 1)), np.arctan2(cone.axis[1], cone.axis[0]), cone.angle]
+    apex, axis, angle = unpack(least_squares(distances, start, method="lm").x)
+    return Cone(apex, axis, float(angle)) if 0 < angle < np.pi / 2 else cone
+
+
+@dataclass(frozen=True)
+class Torus:
+    centre: np.ndarray
+    axis: np.ndarray
+    major: float
+    minor: float
+
+    def tube_centre(self, x: np.ndarray) -> np.ndarray:
+        """(k, 3) the points of the tube's centre circle nearest ``x`` (k, 3)."""
+        rel = x - self.centre
+        radial = rel - np.outer(rel @ self.axis, self.axis)
+        length = np.linalg.norm(radial, axis=1, keepdims=True)
+        fallback = np.cross(self.axis, np.eye(3)[np.argmin(np.abs(self.axis))])
+        return self.centre + self.major * np.where(length > 0, radial / np.where(length > 0, length, 1), fallback)
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Closest points (k, 3) on the torus; points on the tube's centre circle stay."""
+        tube = self.tube_centre(x)
+        rel = x - tube
+        length = np.linalg.norm(rel, axis=1, keepdims=True)
+        return np.where(length > 0, tube + self.minor * rel / np.where(length > 0, length, 1), x)
+
+
+def fit_surface(vertices: np.ndarray, planar: bool, cylinder, tolerance: float, normals: np.ndarray | None = None,
+                centres: np.ndarray | None = None):
+    """The Plane, CylinderSurface, Sphere or Cone all ``vertices`` (k, 3) lie on within ``tolerance``, or
+    None. ``cylinder`` is the patch's fitted :class:`engine.features.Cylinder` (its axis), if any; the
+    faces' ``normals`` and ``centres`` (f, 3), if given, allow a cone."""
     if len(vertices) < 4:
         return None
     candidates = []
@@ -80,21 +193,33 @@ def fit_surface(vertices: np.ndarray, planar: bool, cylinder, tolerance: float):
         solution, *_ = np.linalg.lstsq(matrix, (vertices ** 2).sum(axis=1), rcond=None)
         centre = solution[:3]
         candidates.append(Sphere(centre, float(np.sqrt(max(solution[3] + centre @ centre, 0.0)))))
-    for surface in candidates:
-        if np.abs(surface.project(vertices) - vertices).max() <= tolerance:
-            return surface
-    return None
+        cone = fit_cone(vertices, normals, centres) if normals is not None else None
+        if cone is not None:
+            candidates.append(cone)
+    fitting = [c for c in candidates if np.abs(c.project(vertices) - vertices).max() <= tolerance]
+    if len(fitting) < 2 or normals is None:
+        return fitting[0] if fitting else None
+    # two rings of vertices lie on a sphere and on a cone alike: the one whose normals the facets follow
+    return min(fitting, key=lambda c: np.mean(1 - np.abs(np.einsum("ij,ij->i", c.normals(centres), normals))))
 
 
 def exact_surfaces(geometry, features) -> list:
-    """Per patch of ``features``, the analytic surface its input vertices lie on (:func:`fit_surface`) or None."""
+    """Per patch of ``features``, the exact surface the input gives (CAD: ``features.exact``) or the analytic
+    surface its input vertices lie on (:func:`fit_surface`) or None."""
+    if features.exact is not None:
+        return list(features.exact[0])
     tolerance = EXACT_TOLERANCE * geometry.scale
-    return [fit_surface(p.vertices, p.planar, p.cylinder, tolerance) for p in features.patches]
+    normals, centres = geometry.mesh.face_normals, geometry.mesh.triangles_center
+    return [fit_surface(p.vertices, p.planar, p.cylinder, tolerance, normals[p.faces], centres[p.faces])
+            for p in features.patches]
 
 
 def curve_surfaces(geometry, features, surfaces: list) -> list[list]:
     """Per curve, the exact surfaces of the patches on either side of it; [] unless every such patch has one
-    (a curve along a freeform patch keeps its polyline) or for a curve inside the solid."""
+    (a curve along a freeform patch keeps its polyline) or for a curve inside the solid; the input's exact
+    curve where it gives one (CAD: ``features.exact``)."""
+    if features.exact is not None:
+        return [[c] if c is not None else [] for c in features.exact[1]]
     mesh = geometry.mesh
     n = len(mesh.vertices)
     shared = np.sort(mesh.face_adjacency_edges, axis=1)

@@ -176,7 +176,7 @@ def quadratic(mesh: TetMesh, geometry, features,
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
-    (:mod:`engine.exact`: a plane, cylinder or sphere), else onto the input surface; a curve's chords onto
+    (:mod:`engine.exact`: a plane, cylinder, sphere or cone), else onto the input surface; a curve's chords onto
     the exact intersection of the patches it borders, else onto the curve (a sharp one) or the input surface
     (a smooth cut). Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
     only part of the way (:func:`limit_curving`).

@@ -103,3 +103,31 @@ def test_validate_solves_on_the_written_nodes():
     points, tets10, _ = quadratic(result.mesh, result.geometry, result.features)
     model = build(result)
     assert np.array_equal(model.points, points) and np.array_equal(model.tets10, tets10)
+
+
+def test_a_faceted_cone_is_recognised_whatever_its_facets():
+    """A chamfer's or drill point's cone, faceted unevenly (as STL exporters do): apex, axis and angle exact."""
+    import trimesh
+
+    from engine.exact import Cone, fit_surface
+
+    rng = np.random.default_rng(1)
+    angles = np.sort(rng.uniform(0, 2 * math.pi, 40))
+    apex, axis, half = np.array([1.0, -2.0, 3.0]), np.array([0.0, 0.6, 0.8]), math.radians(59)
+    u = np.cross(axis, [1.0, 0, 0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    ring = lambda t: apex + t * (math.cos(half) * axis + math.sin(half) * (np.outer(np.cos(angles), u) +
+                                                                            np.outer(np.sin(angles), v)))
+    vertices = np.vstack([ring(2.0), ring(5.0)])
+    n = len(angles)
+    faces = np.array([[i, (i + 1) % n, n + i] for i in range(n)] + [[(i + 1) % n, n + (i + 1) % n, n + i]
+                                                                     for i in range(n)])
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    cone = fit_surface(vertices, False, None, 1e-9, mesh.face_normals, mesh.triangles_center)
+    assert isinstance(cone, Cone)
+    assert np.allclose(cone.apex, apex) and np.allclose(np.abs(cone.axis @ axis), 1) and cone.angle == pytest.approx(half)
+    # points off it go to its nappe
+    probe = ring(3.0) + 0.1 * axis
+    assert np.abs(np.linalg.norm(np.cross(cone.project(probe) - apex, axis), axis=1) /
+                  np.linalg.norm(cone.project(probe) - apex, axis=1) - math.sin(half)).max() < 1e-12

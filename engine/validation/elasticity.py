@@ -1,7 +1,7 @@
 """Linear elasticity with quadratic tetrahedra (scikit-fem) on a fuzzymesh mesh.
 
 The model is the mesh's 10-node form as ``fuzzymesh mesh`` writes it (``engine.fe.quadratic``: the nodes of
-planes, cylinders and spheres on their exact surfaces) as a curved scikit-fem ``MeshTet2`` with
+planes, cylinders, spheres and cones on their exact surfaces) as a curved scikit-fem ``MeshTet2`` with
 ``ElementVector(ElementTetP2())``: isoparametric quadratic tetrahedra. Boundary conditions are applied
 by patch and corner names, through the mesh's boundary triangles tagged by patch, never by coordinates.
 The system is solved by conjugate gradients preconditioned with smoothed-aggregation algebraic multigrid
