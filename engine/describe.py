@@ -39,11 +39,15 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
     """(source, geometry, features) of a surface file (several solids allowed) or of a job file's solid
     (built-in shape or file, its names, feature angle and knowledge); ``feature_angle`` overrides.
     Features carry the kinds of the shipped knowledge base plus ``knowledge``."""
+    from .cad import CAD_FORMATS, load_cad
     from .geometry import SURFACE_FORMATS, load_surface
     from .knowledge import load_knowledge
 
     target = Path(target)
-    if target.suffix.lower() in SURFACE_FORMATS:
+    if target.suffix.lower() in CAD_FORMATS:
+        geometry, features = load_cad(target, 30.0 if feature_angle is None else feature_angle,
+                                      allow_multiple_solids=True)
+    elif target.suffix.lower() in SURFACE_FORMATS:
         geometry = load_surface(target, allow_multiple_solids=True)
         features = detect_features(geometry) if feature_angle is None else detect_features(geometry, feature_angle)
     else:

@@ -105,6 +105,8 @@ class Patch:
     cylinder: Cylinder | None = None
     names: list[str] = field(default_factory=list)
     kinds: list[str] = field(default_factory=list)
+    circle: Circle | None = None    # a toroidal blend's tube (CAD input): its radius is the blend's
+    surface: str | None = None      # the CAD face type (Plane, Cylinder, Torus, BSpline surface, ...), CAD input only
 
 
 @dataclass
@@ -115,6 +117,8 @@ class Features:
     face_patch: np.ndarray   # patch index of every surface face
     feature_angle: float
     lengths: dict = field(default_factory=dict)   # characteristic lengths given by a shape
+    exact: tuple | None = None    # (per patch, per curve) exact surfaces / curves given by the input (CAD), each
+                                  # with .project(points); None: fitted from the facets (engine/exact.py)
 
     def named(self, name: str) -> list:
         """All features carrying ``name``."""

@@ -15,6 +15,7 @@ from .exact import on_exact_surfaces
 from .errors import JobError, LimitError, MeshRejected
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
+from .cad import CAD_FORMATS, load_cad
 from .audit import Audit, audit_mesh, idle_patterns
 from .fe import feature_groups, quadratic, tet_bodies
 from .io import FEModel, write_mesh
@@ -70,6 +71,8 @@ def build_geometry(job: Job):
         features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
         features.lengths = dict(shape.lengths)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
+    if job.geometry_file.suffix.lower() in CAD_FORMATS:
+        return load_cad(job.geometry_file, job.feature_angle, allow_multiple_solids=job.allow_multiple_solids)
     geometry = load_surface(job.geometry_file, allow_multiple_solids=job.allow_multiple_solids)
     return geometry, detect_features(geometry, job.feature_angle)
 

@@ -1,0 +1,357 @@
+"""CAD input: STEP, IGES and BREP solids read through Gmsh's OpenCASCADE kernel.
+
+:func:`load_cad` imports the file (STEP and IGES converted to millimetres, OpenCASCADE's default; a file
+without a solid is healed: faces sewn, solids made), fragments several solids so that touching ones share
+their interface, and tessellates every CAD face with Gmsh's 2-D mesher (TURN_ELEMENTS per full turn of a
+curved face) into one closed surface whose triangles know their CAD face. The :class:`Geometry` is that
+surface; the :class:`Features` are found on it with every CAD face a patch of its own (adjacent faces of one
+cylinder, cone, sphere or torus, as exporters split periodic faces, make one patch), so every CAD edge
+between two faces is a curve. Patches and curves are then named from the file (its labels) or ``face-N`` /
+``edge-N`` (N the CAD tag), get feature kinds from their face types (a concave torus is a fillet of its
+minor radius, a narrow cone a chamfer or, concave, a countersink; cylinders keep the shipped tests with the
+CAD's axis and radius), and each an exact surface or curve (analytic for planes, cylinders, cones, spheres
+and tori, else the CAD entity's closest point) onto which :mod:`engine.exact` moves the mesh nodes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import re
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
+
+from .errors import GeometryError
+from .exact import Cone, CylinderSurface, Plane, Sphere, Torus
+from .features import Circle, Features, detect_features
+from .geometry import Geometry, validate_surface
+
+CAD_FORMATS = (".step", ".stp", ".iges", ".igs", ".brep")
+TURN_ANGLE = 10.0        # tessellation: degrees of turn per facet of a curved face
+DEFLECTION = 1e-3        # tessellation: largest sagitta, x the model size
+SAME_SURFACE = 1e-6      # x the model size: two faces' parameters closer than this describe one surface
+NARROW = 1.0             # a cone narrower along its slant than this x its mean radius is a chamfer
+
+
+@dataclass(frozen=True)
+class CadModel:
+    """The OpenCASCADE model of ``path`` as Gmsh holds it, under ``name``; rebuilt the same way (same tags)
+    whenever another user of Gmsh has removed it."""
+
+    path: str
+    name: str
+
+    @contextmanager
+    def current(self):
+        import gmsh
+
+        if not gmsh.isInitialized():
+            gmsh.initialize(["-noenv"], readConfigFiles=False)
+            gmsh.option.setNumber("General.Terminal", 0)
+        previous = gmsh.model.getCurrent()
+        if self.name in gmsh.model.list():
+            gmsh.model.setCurrent(self.name)
+        else:
+            gmsh.model.add(self.name)
+            _build(self.path)
+        try:
+            yield gmsh.model
+        finally:
+            if previous and previous in gmsh.model.list():
+                gmsh.model.setCurrent(previous)
+
+    def closest(self, dim: int, tags: tuple, points: np.ndarray) -> np.ndarray:
+        """(k, 3) closest points to ``points`` (k, 3) on the entities ``tags`` of dimension ``dim``."""
+        points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if len(points) == 0:
+            return points.copy()
+        with self.current() as model:
+            candidates = np.stack([np.reshape(model.getClosestPoint(dim, tag, points.ravel())[0], (-1, 3))
+                                   for tag in tags])
+        best = np.argmin(np.linalg.norm(candidates - points, axis=2), axis=0)
+        return candidates[best, np.arange(len(points))]
+
+
+@dataclass(frozen=True)
+class CadEntity:
+    """CAD faces (dim 2) or edges (dim 1) as an exact surface or curve: ``project(points)`` their closest points."""
+
+    model: CadModel
+    dim: int
+    tags: tuple
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """Closest points (k, 3) on the entities."""
+        return self.model.closest(self.dim, self.tags, x)
+
+
+def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_solids: bool = False):
+    """(Geometry, Features) of a STEP, IGES or BREP file (module docstring)."""
+    path = Path(path)
+    source = str(path)
+    if path.suffix.lower() not in CAD_FORMATS:
+        raise GeometryError(f"unknown CAD format '{path.suffix or '(none)'}'", where=source,
+                            fix=f"give one of: {', '.join(CAD_FORMATS)}")
+    if not path.is_file():
+        raise GeometryError("file not found", where=source, fix="check the path")
+    model = CadModel(str(path.resolve()), f"fuzzymesh-cad:{path.resolve()}")
+    with model.current() as gm:
+        solids = gm.getEntities(3)
+        if not solids:
+            raise GeometryError("the file holds no solid (and its faces could not be sewn into one)", where=source,
+                                fix="export the part as a solid body")
+        if len(solids) > 1 and not allow_multiple_solids:
+            raise GeometryError(f"the file holds {len(solids)} solids", where=source, fix="mesh them one at a time, "
+                                "or set 'allow_multiple_solids: true' in the job's geometry")
+        faces = np.array([tag for _, tag in gm.getEntities(2)])
+        surfaces = [_surface(gm.getType(2, tag), gm.getEntityProperties(2, tag)[1]) for tag in faces]
+        face_names = [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces]
+        edges = np.array([tag for _, tag in gm.getEntities(1)])
+        edge_names = [_label(gm.getEntityName(1, tag)) or f"edge-{tag}" for tag in edges]
+        edge_faces = [gm.getAdjacencies(1, tag)[0] for tag in edges]
+        vertices, triangles, face_tag = _tessellate(gm)
+    face = np.searchsorted(faces, face_tag)                     # per triangle, index into faces
+    edge_faces = [np.searchsorted(faces, pair).tolist() for pair in edge_faces]
+    geometry = validate_surface(vertices, _oriented(vertices, triangles, face), source,
+                                allow_multiple_solids=allow_multiple_solids)
+    if len(geometry.faces) != len(face):
+        raise GeometryError("the CAD faces' tessellation has degenerate triangles", where=source,
+                            fix="heal the model in the CAD tool")
+    group = _groups(surfaces, edge_faces, geometry.scale)
+    features = detect_features(geometry, feature_angle,
+                               [lambda _, g=g: group[face] == g for g in range(1, group.max() + 1)])
+    patch_faces = [np.flatnonzero(group == group[face[p.faces[0]]]) for p in features.patches]
+    for patch, members in zip(features.patches, patch_faces):
+        patch.names = [face_names[k] for k in members]
+        patch.surface = surfaces[members[0]].kind
+        _face_kinds(patch, surfaces[members[0]], geometry)
+    curve_edges = _curve_edges(features, geometry, face, edge_faces, model, edges)
+    for curve, members in zip(features.curves, curve_edges):
+        curve.names = [edge_names[k] for k in members]
+    exact_patches = [surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces]
+    exact_curves = [CadEntity(model, 1, tuple(edges[m].tolist())) if len(m) else
+                    CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
+                    for curve, m in zip(features.curves, curve_edges)]
+    features.exact = (exact_patches, exact_curves)
+    return geometry, features
+
+
+def _build(path: str) -> None:
+    """Import ``path`` into the current Gmsh model: millimetres, healed when it holds no solid, solids fragmented."""
+    import gmsh
+
+    occ = gmsh.model.occ
+    gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
+    try:
+        shapes = occ.importShapes(path)
+    except Exception as exc:   # Gmsh raises a bare Exception with its last error
+        raise GeometryError(f"not a readable CAD file ({exc})", where=path,
+                            fix="check that the file is a valid STEP, IGES or BREP model") from None
+    if not any(dim == 3 for dim, _ in shapes):
+        occ.healShapes(shapes)
+    solids = occ.getEntities(3)
+    if len(solids) > 1:
+        occ.fragment(solids, [])
+    occ.synchronize()
+
+
+def _label(name: str) -> str:
+    """The last part of a Gmsh entity name (``Shapes/Part/hole-wall`` -> ``hole-wall``), '' for none."""
+    return name.rsplit("/", 1)[-1].strip()
+
+
+@dataclass(frozen=True)
+class Surface:
+    """A CAD face's type (Gmsh's name: Plane, Cylinder, Cone, Sphere, Torus, BSpline surface, ...), its
+    parameters (``gmsh.model.getEntityProperties``) and its analytic exact surface, if it has one."""
+
+    kind: str
+    parameters: np.ndarray
+    exact: object | None
+
+
+def _surface(kind: str, parameters) -> Surface:
+    p = np.asarray(parameters, dtype=float)
+    exact = None
+    if kind == "Plane" and len(p) == 4:
+        normal = p[:3] / np.linalg.norm(p[:3])
+        exact = Plane(-p[3] * normal / np.linalg.norm(p[:3]), normal)
+    elif kind == "Cylinder" and len(p) == 7:
+        exact = CylinderSurface(p[:3], _unit(p[3:6]), p[6])
+    elif kind == "Cone" and len(p) == 8:    # OCC: radius p[6] at p[:3], growing along the axis by semi-angle p[7]
+        axis = _unit(p[3:6]) * np.sign(p[7])
+        exact = Cone(p[:3] - axis * p[6] / np.tan(abs(p[7])), axis, abs(float(p[7])))
+    elif kind == "Sphere" and len(p) == 4:
+        exact = Sphere(p[:3], p[3])
+    elif kind == "Torus" and len(p) == 8:
+        exact = Torus(p[:3], _unit(p[3:6]), p[6], p[7])
+    return Surface(kind, p, exact)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+@contextmanager
+def _options(numbers: dict):
+    import gmsh
+
+    saved = {key: gmsh.option.getNumber(key) for key in numbers}
+    for key, value in numbers.items():
+        gmsh.option.setNumber(key, value)
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            gmsh.option.setNumber(key, value)
+
+
+def _tessellate(gm):
+    """OpenCASCADE's tessellation of the CAD faces (BRepMesh, as Gmsh exports STL: TURN_ANGLE, sagitta at most
+    DEFLECTION x the model size; faces share their edges' points): (vertices (n, 3), triangles (t, 3), CAD face
+    tag per triangle (t,)), each face's triangles as OpenCASCADE orients it, degenerate ones left out."""
+    import gmsh
+
+    lo, hi = np.reshape(gm.getBoundingBox(-1, -1), (2, 3))
+    diagonal = float(np.linalg.norm(hi - lo))
+    with tempfile.TemporaryDirectory() as folder, _options({
+            "Mesh.Binary": 0, "Mesh.StlOneSolidPerSurface": 1, "Mesh.StlLinearDeflectionRelative": 0,
+            "Mesh.StlLinearDeflection": DEFLECTION * diagonal, "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE)}):
+        gm.mesh.clear()
+        gmsh.write(str(Path(folder) / "faces.stl"))
+        text = (Path(folder) / "faces.stl").read_text()
+    blocks = re.findall(r"solid Gmsh Surface (\d+)(.*?)endsolid", text, re.S)
+    corners = [np.array(re.findall(r"vertex\s+(\S+)\s+(\S+)\s+(\S+)", body), float).reshape(-1, 3, 3)
+               for _, body in blocks]
+    face_tag = np.repeat([int(tag) for tag, _ in blocks], [len(c) for c in corners])
+    corners = np.concatenate(corners)
+    vertices, index = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    triangles = index.reshape(-1, 3)
+    double_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    kept = double_area > 2e-12 * diagonal * longest          # validate_surface's test: height above 1e-12 x size
+    return vertices, triangles[kept], face_tag[kept]
+
+
+def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """``triangles`` with whole CAD faces (``face``: per triangle) reversed so that neighbours walk their shared
+    edges in opposite directions (Gmsh meshes each face along its own parametrisation) and every connected
+    shell encloses a positive volume."""
+    n = int(face.max()) + 1
+    directed = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    key = np.sort(directed, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    if len(order) % 2 or (key[order[0::2]] != key[order[1::2]]).any():
+        raise GeometryError("the CAD faces' tessellation is not closed", where="the CAD model",
+                            fix="heal the model in the CAD tool (open shells or non-manifold edges)")
+    first, second = order[0::2], order[1::2]
+    a, b = np.repeat(face, 3)[first], np.repeat(face, 3)[second]
+    flip_pair = directed[first, 0] == directed[second, 0]       # walked the same way: one of the two flips
+    rows = np.unique(np.column_stack([a, b, flip_pair])[a != b], axis=0)
+    graph = sparse.coo_matrix((rows[:, 2] + 1, (rows[:, 0], rows[:, 1])), shape=(n, n)).tocsr()
+    graph = graph.maximum(graph.T)                              # weight 1: same way round, 2: opposite
+    shells = csgraph.connected_components(graph, directed=False)[1]
+    flip = np.zeros(n, bool)
+    for root in np.unique(shells, return_index=True)[1]:
+        nodes, parents = csgraph.breadth_first_order(graph, root, directed=False)
+        for node in nodes[1:]:                                  # parents come first in breadth-first order
+            flip[node] = flip[parents[node]] ^ (graph[parents[node], node] == 2)
+    out = np.where(flip[face][:, None], triangles[:, ::-1], triangles)
+    corners = vertices[out]
+    volume = np.bincount(shells[face], np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])),
+                         minlength=shells.max() + 1)
+    return np.where((volume[shells[face]] < 0)[:, None], out[:, ::-1], out)
+
+
+def _groups(surfaces: list, edge_faces: list, scale: float) -> np.ndarray:
+    """Per CAD face, its patch group (1-based): faces joined by an edge (``edge_faces``: the face indices of
+    each edge) that lie on one cylinder, cone, sphere or torus share one."""
+    pairs = np.array([pair for pair in edge_faces if len(pair) == 2], np.int64).reshape(-1, 2)
+    same = [surfaces[i].kind == surfaces[j].kind and surfaces[i].kind in ("Cylinder", "Cone", "Sphere", "Torus")
+            and np.allclose(_canonical(surfaces[i]), _canonical(surfaces[j]), atol=SAME_SURFACE * scale)
+            for i, j in pairs]
+    pairs = pairs[np.asarray(same, bool)] if len(pairs) else pairs
+    graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(surfaces),) * 2)
+    labels = csgraph.connected_components(graph, directed=False)[1]
+    return np.unique(labels, return_inverse=True)[1] + 1
+
+
+def _canonical(surface: Surface) -> np.ndarray:
+    """Parameters of a surface of revolution with its axis pointing one way and its centre moved to the axis
+    point nearest the origin (two faces of one cylinder may carry different centres along it)."""
+    p = surface.parameters.copy()
+    if surface.kind in ("Cylinder", "Cone", "Torus"):
+        axis = _unit(p[3:6])
+        axis = axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
+        if surface.kind == "Cylinder":
+            p[:3] -= (p[:3] @ axis) * axis
+        p[3:6] = axis
+    return p
+
+
+def _face_kinds(patch, surface: Surface, geometry: Geometry) -> None:
+    """A patch's CAD-given shape: a cylinder's exact axis and radius, a concave torus's fillet kind and tube
+    circle, a narrow cone's chamfer or countersink kind."""
+    exact = surface.exact
+    normals = geometry.mesh.face_normals[patch.faces]
+    centres = geometry.mesh.triangles_center[patch.faces]
+    if surface.kind == "Cylinder" and patch.cylinder is not None:
+        axis = exact.axis if exact.axis @ patch.cylinder.axis > 0 else -exact.axis   # the fit's sign convention
+        patch.cylinder = dataclasses.replace(patch.cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
+    elif surface.kind == "Torus":
+        tube = exact.tube_centre(centres)
+        if np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0:
+            patch.kinds.append("fillet")
+        patch.circle = Circle(exact.centre, exact.axis, float(exact.minor))
+    elif surface.kind == "Cone":
+        rel = centres - exact.apex
+        radial = rel - np.outer(rel @ exact.axis, exact.axis)
+        radius = np.linalg.norm(radial, axis=1)
+        if np.ptp(np.linalg.norm(rel, axis=1)) < NARROW * radius.mean():    # its width along the generators
+            concave = np.mean(np.einsum("ij,ij->i", radial, normals)) < 0
+            patch.kinds.append("countersink" if concave else "chamfer")
+
+
+def _curve_edges(features: Features, geometry: Geometry, face: np.ndarray, edge_faces: list, model: CadModel,
+                 edges: np.ndarray) -> list[np.ndarray]:
+    """Per curve, the indices into ``edges`` of the CAD edges it runs along: each chord goes to the nearest of
+    the edges between the CAD faces on its two sides (``face``: per triangle, ``edge_faces``: per edge);
+    empty for a curve inside one CAD face (a chart's cut)."""
+    mesh = geometry.mesh
+    n = len(mesh.vertices)
+    shared = np.sort(mesh.face_adjacency_edges, axis=1)
+    keys = shared[:, 0] * n + shared[:, 1]
+    order = np.argsort(keys)
+    between = {}
+    for k, pair in enumerate(edge_faces):
+        between.setdefault(frozenset(pair), []).append(k)
+    out = []
+    for curve in features.curves:
+        if curve.vertices is None:
+            out.append(np.zeros(0, np.int64))
+            continue
+        ends = np.column_stack([curve.vertices, np.roll(curve.vertices, -1)])
+        ends = np.sort(ends if curve.closed else ends[:-1], axis=1)
+        at = order[np.clip(np.searchsorted(keys, ends[:, 0] * n + ends[:, 1], sorter=order), 0, len(keys) - 1)]
+        sides = face[mesh.face_adjacency[at]]                 # (chords, 2) CAD face indices
+        chosen = []
+        for pair in np.unique(np.sort(sides, axis=1), axis=0):
+            candidates = between.get(frozenset(pair.tolist()), []) if pair[0] != pair[1] else []
+            if not candidates:
+                continue
+            mine = (np.sort(sides, axis=1) == pair).all(axis=1)
+            middles = mesh.vertices[ends[mine]].mean(axis=1)
+            distance = np.stack([np.linalg.norm(model.closest(1, (int(edges[k]),), middles) - middles, axis=1)
+                                 for k in candidates])
+            chosen += [candidates[k] for k in np.unique(np.argmin(distance, axis=0))]
+        out.append(np.unique(np.asarray(chosen, np.int64)))
+    return out
+
+
+def _beside(geometry: Geometry, curve) -> np.ndarray:
+    """The triangles at a curve's middle point."""
+    return geometry.closest_point(curve.points[len(curve.points) // 2][None])[2]
