@@ -65,7 +65,7 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
 
 def feature_records(features: Features) -> dict:
     """Every corner, curve and patch: id, names, kinds, size (curve length and circle radius, patch area
-    and cylinder radius), whether a curve is sharp (a smooth cut is one that charts a surface), convex, its
+    and cylinder or torus tube radius, and a CAD face's type), whether a curve is sharp (a smooth cut is one that charts a surface), convex, its
     dihedral angle (degrees, the kinds' ``dihedral_above`` / ``dihedral_below``), centroid
     and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
     out = {}
@@ -79,7 +79,8 @@ def feature_records(features: Features) -> dict:
                               closed=feature.closed, sharp=feature.sharp, convex=feature.convex,
                               dihedral=feature.dihedral)
             if kind == "patch":
-                record.update(area=feature.area, radius=feature.cylinder.radius if feature.cylinder else None)
+                radius = feature.cylinder.radius if feature.cylinder else feature.circle.radius if feature.circle else None
+                record.update(area=feature.area, radius=radius, surface=feature.surface)
             record.update(centroid=centroid(feature).tolist(), bounds=[points.min(axis=0).tolist(),
                                                                       points.max(axis=0).tolist()])
             records.append(record)
@@ -99,6 +100,7 @@ def feature_table(records: dict, scale: float) -> str:
             low, high = r["bounds"]
             box = "-" if low == high else f"[{_coordinates(low, scale)}] .. [{_coordinates(high, scale)}]"
             kinds = r["kinds"] + (["(smooth cut)"] if r.get("sharp") is False else [])
+            size = f"{r['surface']} {size}" if r.get("surface") else size
             rows.append((r["id"], ", ".join(r["names"]) or "-", ", ".join(kinds) or "-", size or "-",
                          _coordinates(r["centroid"], scale), box))
     widths = [max(len(row[k]) for row in rows) for k in range(len(header))]
