@@ -181,14 +181,14 @@ def quadratic(mesh: TetMesh, geometry, features,
     (a smooth cut). Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
     only part of the way (:func:`limit_curving`).
     """
-    unique, tets10, triangles6 = quadratic_elements(mesh)
+    owner, side, patch = tet_boundary(mesh)
+    unique, tets10, triangles6 = quadratic_elements(mesh, (owner, side))
     straight = mesh.points[unique].mean(axis=1)
     curved = straight.copy()
     on_boundary = np.unique(triangles6[:, 3:]) - len(mesh.points)
     if len(on_boundary):
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
     surfaces = exact_surfaces(geometry, features)
-    patch = tet_boundary(mesh)[2]     # the patch of each triangle6, in its order
     for p in np.unique(patch[patch >= 0]):
         if surfaces[p] is not None:
             rows = np.unique(triangles6[patch == p, 3:]) - len(mesh.points)
@@ -208,16 +208,16 @@ def quadratic(mesh: TetMesh, geometry, features,
     return points, tets10, triangles6
 
 
-def quadratic_elements(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def quadratic_elements(mesh: TetMesh, boundary: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The 10-node connectivity of a linear mesh: (unique edges (e, 2), tets10 (m, 10), boundary triangle6
-    (t, 6) in the order of :func:`tet_boundary`).
+    (t, 6) on the sides ``boundary`` = (owner, side) of :func:`tet_boundary`, computed if not given).
 
     Mid-edge node k of the quadratic mesh is ``len(mesh.points) + k``, on edge ``unique[k]``.
     """
     edges = np.sort(mesh.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
     unique, inverse = np.unique(edges, axis=0, return_inverse=True)
     tets10 = np.hstack([mesh.tets, len(mesh.points) + inverse.reshape(-1, 6)])
-    owner, side, _ = tet_boundary(mesh)
+    owner, side = boundary if boundary is not None else tet_boundary(mesh)[:2]
     return unique, tets10, side_cells(tets10, owner, side)
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..fe import CORNER, quadratic, row_index
+from ..fe import CORNER, quadratic, row_index, tet_boundary
 
 QUADRATURE_ORDER = 2    # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
 TOLERANCE = 1e-10       # relative residual of the conjugate gradients
@@ -53,7 +53,8 @@ class Model:
     result: object            # engine.pipeline.Result
     points: np.ndarray
     tets10: np.ndarray
-    triangles6: np.ndarray
+    triangles6: np.ndarray    # the tets' own boundary faces (engine.fe.tet_boundary order)
+    face_patch: np.ndarray    # the patch of each
     mesh: object              # skfem.MeshTet2
     basis: object             # skfem.CellBasis, vector P2
     dof: np.ndarray
@@ -68,12 +69,12 @@ class Model:
         return _patches(self.result, name)
 
     def patch(self, name: str) -> np.ndarray:
-        """Indices of the boundary triangles on the patch named ``name``."""
-        return np.flatnonzero(np.isin(self.result.mesh.boundary_patch, self.patch_indices(name)))
+        """Indices of the boundary triangle6 (the tets' own faces) on the patch named ``name``."""
+        return np.flatnonzero(np.isin(self.face_patch, self.patch_indices(name)))
 
     def facets(self, name: str) -> np.ndarray:
         """scikit-fem facet indices of the patch named ``name``."""
-        faces = np.sort(self.result.mesh.boundary[self.patch(name)], axis=1)
+        faces = np.sort(self.triangles6[self.patch(name), :3], axis=1)
         return row_index(np.sort(self.mesh.facets.T, axis=1), faces)
 
     def patch_nodes(self, name: str) -> np.ndarray:
@@ -115,7 +116,7 @@ def build(result) -> Model:
     basis = Basis(mesh, ElementVector(ElementTetP2()), intorder=QUADRATURE_ORDER)
     dof = np.empty(len(points), np.int64)
     dof[tets10] = (basis.element_dofs[::3] // 3).T    # the element's local node order is tets10's
-    return Model(result, points, tets10, triangles6, mesh, basis, dof)
+    return Model(result, points, tets10, triangles6, tet_boundary(result.mesh)[2], mesh, basis, dof)
 
 
 def stiffness(model: Model, material: Material):
