@@ -15,6 +15,7 @@ and tori, else the CAD entity's closest point) onto which :mod:`engine.exact` mo
 from __future__ import annotations
 
 import dataclasses
+import logging
 import re
 import tempfile
 from contextlib import contextmanager
@@ -30,9 +31,12 @@ from .exact import Cone, CylinderSurface, Plane, Sphere, Torus
 from .features import Circle, Features, detect_features
 from .geometry import Geometry, validate_surface
 
+log = logging.getLogger(__name__)
+
 CAD_FORMATS = (".step", ".stp", ".iges", ".igs", ".brep")
 TURN_ANGLE = 10.0        # tessellation: degrees of turn per facet of a curved face
 DEFLECTION = 1e-3        # tessellation: largest sagitta, x the model size
+MESHER_SIZE = 40         # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
 SAME_SURFACE = 1e-6      # x the model size: two faces' parameters closer than this describe one surface
 NARROW = 1.0             # a cone narrower along its slant than this x its mean radius is a chamfer
 
@@ -112,12 +116,25 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         face_names = [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces]
         edges = np.array([tag for _, tag in gm.getEntities(1)])
         edge_names = [_label(gm.getEntityName(1, tag)) or f"edge-{tag}" for tag in edges]
-        edge_faces = [gm.getAdjacencies(1, tag)[0] for tag in edges]
-        vertices, triangles, face_tag = _tessellate(gm)
-    face = np.searchsorted(faces, face_tag)                     # per triangle, index into faces
-    edge_faces = [np.searchsorted(faces, pair).tolist() for pair in edge_faces]
-    geometry = validate_surface(vertices, _oriented(vertices, triangles, face), source,
-                                allow_multiple_solids=allow_multiple_solids)
+        edge_faces = [np.searchsorted(faces, gm.getAdjacencies(1, tag)[0]).tolist() for tag in edges]
+        shared = [tag for tag in faces if len(gm.getAdjacencies(2, tag)[0]) > 1]
+        if shared:
+            raise GeometryError(f"solids of the file touch (they share face-{shared[0]} and {len(shared) - 1} more): "
+                                "a conforming interface between solids is not supported yet", where=source,
+                                fix="fuse them into one solid in the CAD tool, or mesh them one at a time")
+    for mesher in (False, True):
+        with model.current() as gm:
+            vertices, triangles, face_tag = _tessellate(gm, mesher)
+        face = np.searchsorted(faces, face_tag)                     # per triangle, index into faces
+        try:
+            geometry = validate_surface(vertices, _oriented(vertices, triangles, face), source,
+                                        allow_multiple_solids=allow_multiple_solids)
+            break
+        except GeometryError as error:
+            if mesher:
+                raise
+            log.warning("%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
+                        "instead, where cylinders and cones are not recognised from the facets", source, error.what)
     if len(geometry.faces) != len(face):
         raise GeometryError("the CAD faces' tessellation has degenerate triangles", where=source,
                             fix="heal the model in the CAD tool")
@@ -210,25 +227,38 @@ def _options(numbers: dict):
             gmsh.option.setNumber(key, value)
 
 
-def _tessellate(gm):
-    """OpenCASCADE's tessellation of the CAD faces (BRepMesh, as Gmsh exports STL: TURN_ANGLE, sagitta at most
-    DEFLECTION x the model size; faces share their edges' points): (vertices (n, 3), triangles (t, 3), CAD face
-    tag per triangle (t,)), each face's triangles as OpenCASCADE orients it, degenerate ones left out."""
+def _tessellate(gm, mesher: bool = False):
+    """The CAD faces as triangles: (vertices (n, 3), triangles (t, 3), CAD face tag per triangle (t,)), each
+    face's triangles as the tessellator orients it, degenerate ones left out, faces sharing their edges' points.
+    OpenCASCADE's tessellation (BRepMesh, as Gmsh exports STL: TURN_ANGLE, sagitta at most DEFLECTION x the
+    model size), whose strips along cylinders and cones the feature detection recognises; or, with ``mesher``,
+    Gmsh's 2-D mesh (as many elements per turn, sides of at most the model size / MESHER_SIZE)."""
     import gmsh
 
     lo, hi = np.reshape(gm.getBoundingBox(-1, -1), (2, 3))
     diagonal = float(np.linalg.norm(hi - lo))
-    with tempfile.TemporaryDirectory() as folder, _options({
-            "Mesh.Binary": 0, "Mesh.StlOneSolidPerSurface": 1, "Mesh.StlLinearDeflectionRelative": 0,
-            "Mesh.StlLinearDeflection": DEFLECTION * diagonal, "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE)}):
+    if mesher:
+        with _options({"Mesh.MeshSizeFromCurvature": 360 / TURN_ANGLE, "Mesh.MeshSizeMax": diagonal / MESHER_SIZE,
+                       "Mesh.MeshSizeMin": 0, "Mesh.Algorithm": 6}):
+            gm.mesh.clear()
+            gm.mesh.generate(2)
+        tags, xyz, _ = gm.mesh.getNodes()
+        xyz = xyz.reshape(-1, 3)[np.argsort(tags)]
+        blocks = [(tag, gm.mesh.getElements(2, tag)) for _, tag in gm.getEntities(2)]
+        blocks = [(tag, xyz[np.searchsorted(np.sort(tags), nodes[list(types).index(2)].reshape(-1, 3))])
+                  for tag, (types, _, nodes) in blocks]
         gm.mesh.clear()
-        gmsh.write(str(Path(folder) / "faces.stl"))
-        text = (Path(folder) / "faces.stl").read_text()
-    blocks = re.findall(r"solid Gmsh Surface (\d+)(.*?)endsolid", text, re.S)
-    corners = [np.array(re.findall(r"vertex\s+(\S+)\s+(\S+)\s+(\S+)", body), float).reshape(-1, 3, 3)
-               for _, body in blocks]
-    face_tag = np.repeat([int(tag) for tag, _ in blocks], [len(c) for c in corners])
-    corners = np.concatenate(corners)
+    else:
+        with tempfile.TemporaryDirectory() as folder, _options({
+                "Mesh.Binary": 0, "Mesh.StlOneSolidPerSurface": 1, "Mesh.StlLinearDeflectionRelative": 0,
+                "Mesh.StlLinearDeflection": DEFLECTION * diagonal, "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE)}):
+            gm.mesh.clear()
+            gmsh.write(str(Path(folder) / "faces.stl"))
+            text = (Path(folder) / "faces.stl").read_text()
+        blocks = [(int(tag), np.array(re.findall(r"vertex\s+(\S+)\s+(\S+)\s+(\S+)", body), float).reshape(-1, 3, 3))
+                  for tag, body in re.findall(r"solid Gmsh Surface (\d+)(.*?)endsolid", text, re.S)]
+    face_tag = np.repeat([tag for tag, _ in blocks], [len(c) for _, c in blocks])
+    corners = np.concatenate([c for _, c in blocks])
     vertices, index = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
     triangles = index.reshape(-1, 3)
     double_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)

@@ -1,7 +1,7 @@
 """CAD input (issue 17): STEP files written by Gmsh's OpenCASCADE here, read back through engine/cad.py.
 
-Parts: a box with two holes, the corpus's filleted bracket (tests/parts/make_parts.py), the plate-cylinder
-junction and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
+Parts: a box with two holes, the corpus's filleted bracket and lofted handle (tests/parts/make_parts.py), the
+plate-cylinder junction, two boxes apart and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
 fillets with the CAD's radii, the junction's concave circle, exact surfaces (mesh nodes and 10-node
 mid-nodes on the CAD faces), the volume against the CAD's, the pipeline's gate and files, and the STEP
 part against its STL export.
@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from engine.describe import solid_features
+from engine.errors import GeometryError
 from engine.fe import quadratic, tet_boundary, side_cells
 from engine.job import job_from_dict
 from engine.pipeline import run
@@ -43,8 +44,14 @@ def two_boxes():
     occ.addBox(40, 0, 0, 30, 30, 20)
 
 
+def apart():
+    """Two boxes 10 apart, one with a hole."""
+    occ.addBox(0, 0, 0, 40, 30, 20)
+    make_parts._cut(occ.addBox(50, 0, 0, 30, 30, 20), occ.addCylinder(65, 15, -1, 0, 0, 22, 5))
+
+
 PARTS = {"box_with_holes": box_with_holes, "bracket": make_parts.bracket, "junction": junction,
-         "two_boxes": two_boxes}
+         "two_boxes": two_boxes, "apart": apart, "lofted_handle": make_parts.lofted_handle}
 
 
 @pytest.fixture(scope="module")
@@ -121,3 +128,20 @@ def test_step_part_meshes_onto_the_cad(step_files, tmp_path):
     assert _off_surface(points, triangles6[:, 3:], patch, surfaces) < 0.01 * h
     assert abs(mesh.volume / cad_volume - 1) < 5e-3
     assert result.quality["min_dihedral"]["min"] > 10
+
+
+def test_solids_apart_are_bodies_touching_ones_are_refused(step_files):
+    _, geometry, features = solid_features(step_files["apart"][0])
+    assert geometry.bodies == 2
+    assert geometry.volume == pytest.approx(step_files["apart"][1], rel=2e-3)
+    assert [p.cylinder.radius for p in features.patches if "hole" in p.kinds] == [5.0]
+    with pytest.raises(GeometryError, match="share face-.*not supported yet"):
+        solid_features(step_files["two_boxes"][0])
+
+
+def test_a_face_opencascade_tessellates_badly_is_meshed_by_gmsh(step_files, caplog):
+    """The lofted handle's twisted elliptic cap: BRepMesh's triangles cross each other after the STEP round trip."""
+    _, geometry, features = solid_features(step_files["lofted_handle"][0])
+    assert "meshed by Gmsh instead" in caplog.text
+    assert geometry.volume == pytest.approx(step_files["lofted_handle"][1], rel=2e-3)
+    assert {p.surface for p in features.patches} == {"BSpline surface", "Plane", "Cylinder"}
