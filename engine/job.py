@@ -38,7 +38,8 @@ def job_schema() -> dict:
         "geometry": Field(MAPPING, required=True, doc="what to mesh: 'shape' (+ 'parameters') or 'file'", fields={
             "shape": Field(STRING, choices=tuple(SHAPES), doc="a built-in parametric solid"),
             "parameters": Field(MAPPING, default={}, open_keys=True, doc="the shape's parameters"),
-            "file": Field(STRING, doc="an STL, OBJ, PLY, OFF or GLB surface, relative to the job file"),
+            "file": Field(STRING, doc="an STL, OBJ, PLY, OFF or GLB surface or a STEP, IGES or BREP "
+                                       "model, relative to the job file"),
             "allow_multiple_solids": Field(BOOLEAN, default=False, doc="accept several disconnected solids"),
             "feature_angle": Field(NUMBER, default=30.0, check=in_range(0.0, 180.0),
                                    doc="dihedral angle in degrees above which an edge is a feature edge"),
