@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 import statistics
 import subprocess
 import sys
@@ -52,11 +53,12 @@ def once(size: float, scale: float | None, profile: str | None) -> dict:
     if profiler:
         profiler.enable()
     begin = time.perf_counter()
-    from engine.job import default_job, job_from_dict
+    from engine.job import job_from_dict
     from engine.pipeline import run
     imports = time.perf_counter() - begin
     if scale is None:
-        job = dataclasses.replace(default_job(), size=size)
+        job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": size},   # uniform, no recipe
+                            base_dir=Path.cwd(), source="<profile>")
     else:
         from cases import junction_job
         job = job_from_dict(junction_job("junction-edge", scale))

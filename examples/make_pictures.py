@@ -69,7 +69,8 @@ def main() -> None:
         print(f"{name}: {len(result.mesh.tets):,} tetrahedra in {sum(result.timings.values()):.1f} s")
         for label, cut in CUTS.items():
             (page,) = write_report(job.output_dir, job.output_name, cut)
-            png = palette_png(report_pictures(page.read_text())["Cut through the mesh"])
+            axis, value = cut
+            png = palette_png(report_pictures(page.read_text())[f"Cut at {'xyz'[axis]} = {value:.4g}"])
             target = IMAGES / f"{name}-cut-{label}.png"
             target.write_bytes(png)
             print(f"  wrote {target.relative_to(EXAMPLES.parent)} ({len(png) / 1024:.0f} KB)")
