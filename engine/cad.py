@@ -1,16 +1,17 @@
 """CAD input: STEP, IGES and BREP solids read through Gmsh's OpenCASCADE kernel.
 
 :func:`load_cad` imports the file (STEP and IGES converted to millimetres, OpenCASCADE's default; a file
-without a solid is healed: faces sewn, solids made), fragments several solids so that touching ones share
-their interface, and tessellates every CAD face with Gmsh's 2-D mesher (TURN_ELEMENTS per full turn of a
-curved face) into one closed surface whose triangles know their CAD face. The :class:`Geometry` is that
-surface; the :class:`Features` are found on it with every CAD face a patch of its own (adjacent faces of one
-cylinder, cone, sphere or torus, as exporters split periodic faces, make one patch), so every CAD edge
-between two faces is a curve. Patches and curves are then named from the file (its labels) or ``face-N`` /
-``edge-N`` (N the CAD tag), get feature kinds from their face types (a concave torus is a fillet of its
-minor radius, a narrow cone a chamfer or, concave, a countersink; cylinders keep the shipped tests with the
-CAD's axis and radius), and each an exact surface or curve (analytic for planes, cylinders, cones, spheres
-and tori, else the CAD entity's closest point) onto which :mod:`engine.exact` moves the mesh nodes.
+without a solid is healed: faces sewn, solids made), fragments several solids (touching ones, which would
+share a face, are refused) and tessellates the CAD faces with OpenCASCADE's BRepMesh (Gmsh's 2-D mesher where
+that is not a valid solid) into one closed surface whose triangles know their CAD face. The
+:class:`Geometry` is that surface; the :class:`Features` are found on it with every CAD face a patch of its
+own (adjacent faces of one cylinder, cone, sphere or torus, as exporters split periodic faces, make one
+patch), so every CAD edge between two faces is a curve. Patches and curves are then named from the file (its
+labels) or ``face-N`` / ``edge-N`` (N the CAD tag), get feature kinds from their face types (a concave torus
+is a fillet of its minor radius, a narrow cone a chamfer or, concave, a countersink; cylinders keep the
+shipped tests with the CAD's axis and radius), and each an exact surface or curve (analytic for planes,
+cylinders, cones, spheres and tori, else the CAD entity's closest point) onto which :mod:`engine.exact`
+moves the mesh nodes and 10-node mid-edge nodes.
 """
 from __future__ import annotations
 
