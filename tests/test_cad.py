@@ -145,3 +145,14 @@ def test_a_face_opencascade_tessellates_badly_is_meshed_by_gmsh(step_files, capl
     assert "meshed by Gmsh instead" in caplog.text
     assert geometry.volume == pytest.approx(step_files["lofted_handle"][1], rel=2e-3)
     assert {p.surface for p in features.patches} == {"BSpline surface", "Plane", "Cylinder"}
+
+
+def test_step_lengths_are_read_in_millimetres(step_files, tmp_path):
+    """The box with holes declared in metres instead of millimetres: the job's unit is the millimetre."""
+    text = step_files["box_with_holes"][0].read_text()
+    assert "SI_UNIT(.MILLI.,.METRE.)" in text
+    metres = tmp_path / "box_in_metres.stp"
+    metres.write_text(text.replace("SI_UNIT(.MILLI.,.METRE.)", "SI_UNIT($,.METRE.)"))
+    _, geometry, features = solid_features(metres)
+    assert geometry.bounds[1] == pytest.approx([100e3, 60e3, 20e3])
+    assert sorted(p.cylinder.radius for p in features.patches if "hole" in p.kinds) == pytest.approx([4e3, 6e3])
