@@ -38,7 +38,7 @@ ENTRIES = [
     ("boundary: pymeshlab report", "engine/quality.py", "boundary_report"),
     ("output: VTU (meshio, zlib)", "meshio/vtu/_vtu.py", "write"),
     ("output: report HTML (matplotlib)", "engine/report.py", "render_html"),
-    ("output: all files", "engine/io.py", "write_mesh"),
+    ("output: all files", "engine/atomic.py", "write_all_or_nothing"),
 ]
 
 

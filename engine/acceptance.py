@@ -116,7 +116,7 @@ def _locate(point: np.ndarray, geometry, features) -> str:
     """``(x, y, z), near <patch description>``: the point and the patch of the input face nearest to it."""
     import igl
 
-    from .describe import describe
+    from .features import describe
 
     _, face, _ = igl.point_mesh_squared_distance(point.reshape(1, 3), np.asarray(geometry.mesh.vertices, float),
                                                  np.asarray(geometry.mesh.faces, np.int64))

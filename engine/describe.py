@@ -1,6 +1,5 @@
-"""What a solid's features are and where they lie, in words and numbers.
+"""What a solid's features are and where they lie, in words and numbers (``fuzzymesh features``).
 
-:func:`describe` names one corner, curve or patch for a message (``patch-11 (centroid 12.1, 4, 30)``);
 :func:`solid_features` finds the features of a surface file or a job's solid, classified into the
 knowledge base's feature kinds, without sizing or meshing; :func:`feature_records` and
 :func:`feature_table` list them for ``fuzzymesh features`` (JSON-ready records, aligned text).
@@ -12,27 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .features import Corner, Curve, Features, classify, detect_features
+from .features import Features, centroid, classify, coordinates, detect_features, number
 
 TYPES = (("corner", "corners"), ("curve", "curves"), ("patch", "patches"))
-
-
-def centroid(feature) -> np.ndarray:
-    """A corner's point, a curve's centroid (by length along it), a patch's area centroid."""
-    if isinstance(feature, Corner):
-        return feature.point
-    if isinstance(feature, Curve):
-        line = feature.polyline
-        length = np.linalg.norm(np.diff(line, axis=0), axis=1)
-        middles = (line[1:] + line[:-1]) / 2
-        return length @ middles / length.sum() if length.sum() > 0 else line.mean(axis=0)
-    return feature.centroid
-
-
-def describe(feature) -> str:
-    """The feature's id and centroid, e.g. ``patch-11 (centroid 12.1, 4, 30)``, for messages."""
-    point = centroid(feature)
-    return f"{feature.id} (centroid {_coordinates(point, np.abs(point).max())})"
 
 
 def solid_features(target: str | Path, feature_angle: float | None = None, knowledge=()):
@@ -95,23 +76,13 @@ def feature_table(records: dict, scale: float) -> str:
     rows = [header]
     for _, plural in TYPES:
         for r in records[plural]:
-            size = (f"L {_number(r['length'])}" if "length" in r else f"A {_number(r['area'])}" if "area" in r
-                    else "") + (f", r {_number(r['radius'])}" if r.get("radius") is not None else "")
+            size = (f"L {number(r['length'])}" if "length" in r else f"A {number(r['area'])}" if "area" in r
+                    else "") + (f", r {number(r['radius'])}" if r.get("radius") is not None else "")
             low, high = r["bounds"]
-            box = "-" if low == high else f"[{_coordinates(low, scale)}] .. [{_coordinates(high, scale)}]"
+            box = "-" if low == high else f"[{coordinates(low, scale)}] .. [{coordinates(high, scale)}]"
             kinds = r["kinds"] + (["(smooth cut)"] if r.get("sharp") is False else [])
             size = f"{r['surface']} {size}" if r.get("surface") else size
             rows.append((r["id"], ", ".join(r["names"]) or "-", ", ".join(kinds) or "-", size or "-",
-                         _coordinates(r["centroid"], scale), box))
+                         coordinates(r["centroid"], scale), box))
     widths = [max(len(row[k]) for row in rows) for k in range(len(header))]
     return "\n".join("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows)
-
-
-def _coordinates(point, scale: float) -> str:
-    point = np.asarray(point, dtype=float)
-    return ", ".join(_number(x) for x in np.where(np.abs(point) <= 1e-9 * scale, 0.0, point))
-
-
-def _number(x: float) -> str:
-    """Four significant digits, never an exponent: 19290, 94.22, 0.001235."""
-    return np.format_float_positional(x, precision=4, unique=False, fractional=False, trim="-")

@@ -604,3 +604,34 @@ def apply_names(features: Features, rules, given_curves=()) -> Features:
             curve.circle = fit_circle(curve.points)
         features.curves.append(curve)
     return features
+
+
+# ------------------------------------------------------------------ naming features in messages
+
+def centroid(feature) -> np.ndarray:
+    """A corner's point, a curve's centroid (by length along it), a patch's area centroid."""
+    if isinstance(feature, Corner):
+        return feature.point
+    if isinstance(feature, Curve):
+        line = feature.polyline
+        length = np.linalg.norm(np.diff(line, axis=0), axis=1)
+        middles = (line[1:] + line[:-1]) / 2
+        return length @ middles / length.sum() if length.sum() > 0 else line.mean(axis=0)
+    return feature.centroid
+
+
+def describe(feature) -> str:
+    """The feature's id and centroid, e.g. ``patch-11 (centroid 12.1, 4, 30)``, for messages."""
+    point = centroid(feature)
+    return f"{feature.id} (centroid {coordinates(point, np.abs(point).max())})"
+
+
+def coordinates(point, scale: float) -> str:
+    """A point as ``x, y, z`` (:func:`number` each), coordinates within 1e-9 x ``scale`` of 0 as 0."""
+    point = np.asarray(point, dtype=float)
+    return ", ".join(number(x) for x in np.where(np.abs(point) <= 1e-9 * scale, 0.0, point))
+
+
+def number(x: float) -> str:
+    """Four significant digits, never an exponent: 19290, 94.22, 0.001235."""
+    return np.format_float_positional(x, precision=4, unique=False, fractional=False, trim="-")

@@ -2,15 +2,13 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import meshio
 import numpy as np
 
-from .errors import FuzzymeshError
+from .atomic import Target
 from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
 from .mesh import TetMesh
 from .meshing.tetra import face_owners
@@ -31,7 +29,6 @@ class FEModel:
     cell_data: dict = field(default_factory=dict)    # per element (the audit)
     point_data: dict = field(default_factory=dict)   # per node (the audit; -1 / 0 on mid-edge nodes)
     legend: dict | None = None                       # the audit legend, written as <name>.audit.json
-    report: dict | None = None                       # the report figures, written as <name>.report.json / .html
 
     @staticmethod
     def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
@@ -155,47 +152,9 @@ def _abaqus_name(name: str) -> str:
     return name.replace("-", "_").replace(" ", "_")
 
 
-def write_all_or_nothing(targets: list[tuple[Path, object]]) -> list[Path]:
-    """Write every ``(path, write)`` to a temporary file, then rename them all into place.
-
-    ``write(temporary_path)`` writes one file. If any write or rename fails, this
-    run's temporary and already renamed files are removed and a one-line
-    FuzzymeshError is raised: a failed run leaves no partial output.
-    """
-    staged: list[tuple[str, Path]] = []
-    placed: list[Path] = []
-    current = targets[0][0]
-    try:
-        for path, write in targets:
-            current = path
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-            os.close(fd)
-            staged.append((tmp, path))
-            write(tmp)
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)
-        for tmp, path in staged:
-            current = path
-            os.replace(tmp, path)
-            placed.append(path)
-    except OSError as exc:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        for path in placed:
-            path.unlink(missing_ok=True)
-        raise FuzzymeshError(f"cannot write ({exc.strerror or exc})", where=str(current),
-                             fix="choose a writable output folder and file name") from None
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    return placed
-
-
-def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Path]:
-    """Write ``model`` as ``directory/name.<format>`` for each format; return the paths."""
+def mesh_targets(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Target]:
+    """The files of ``model``: ``directory/name.<format>`` for each format and the audit legend
+    ``name.audit.json``, as (path, write) targets for :func:`engine.atomic.write_all_or_nothing`."""
     writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
                "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
                "inp": lambda tmp: write_abaqus(tmp, model),
@@ -205,11 +164,4 @@ def write_mesh(model: FEModel, directory: Path, name: str, formats: list[str]) -
     if model.legend is not None:
         targets.append((Path(directory) / f"{name}.audit.json",
                         lambda tmp: Path(tmp).write_text(json.dumps(model.legend, indent=1))))
-    if model.report is not None and model.legend is not None:
-        from .report import render_html
-
-        page = render_html(model.report, model.legend, model.points, model.tets[:, :4], model.cell_data)
-        targets.append((Path(directory) / f"{name}.report.json",
-                        lambda tmp: Path(tmp).write_text(json.dumps(model.report, indent=1))))
-        targets.append((Path(directory) / f"{name}.report.html", lambda tmp: Path(tmp).write_text(page)))
-    return write_all_or_nothing(targets)
+    return targets

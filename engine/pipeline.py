@@ -18,13 +18,14 @@ from .geometry import Geometry, load_surface
 from .cad import CAD_FORMATS, load_cad
 from .audit import Audit, audit_mesh, idle_patterns
 from .fe import feature_groups, quadratic, tet_bodies
-from .io import FEModel, write_mesh
+from .atomic import write_all_or_nothing
+from .io import FEModel, mesh_targets
 from .job import Job
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
-from .report import report_summary
+from .report import report_summary, report_targets
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
 from .shapes import build_shape
@@ -123,6 +124,15 @@ def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, au
     model = FEModel.build(mesh, feature_groups(mesh, features, body), quadratic_elements, audit)
     model.cell_data["body"] = (body + 1).astype(np.int32)
     return model
+
+
+def write_files(model: FEModel, summary: dict, job: Job, name: str) -> list[Path]:
+    """The mesh in the job's formats, its audit legend and its report, all or none (engine/atomic.py)."""
+    targets = mesh_targets(model, job.output_dir, name, job.output_formats)
+    if model.legend is not None:
+        targets += report_targets(summary, model.legend, model.points, model.tets[:, :4], model.cell_data,
+                                  job.output_dir, name)
+    return write_all_or_nothing(targets)
 
 
 def describe_mesher_stats(stats: dict) -> str:
@@ -237,14 +247,13 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
                        scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None)
         except MeshRejected:
             if write and keep_invalid:
-                model.report = {**report_summary(result), "warnings": warnings}
-                files = write_mesh(model, job.output_dir, f"{job.output_name}.invalid", job.output_formats)
+                files = write_files(model, {**report_summary(result), "warnings": warnings}, job,
+                                    f"{job.output_name}.invalid")
                 log.warning("kept the rejected mesh for inspection: %s", ", ".join(map(str, files)))
             raise
     log.info("acceptance: passed (%.2f s)", timings["acceptance"])
     if write:
         with stage("output", timings):
-            model.report = {**report_summary(result), "warnings": warnings}
-            result.files = write_mesh(model, job.output_dir, job.output_name, job.output_formats)
+            result.files = write_files(model, {**report_summary(result), "warnings": warnings}, job, job.output_name)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result

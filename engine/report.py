@@ -49,7 +49,7 @@ def write_report(directory: Path, name: str, cut: tuple[int, float] | None = Non
     import meshio
 
     from .errors import JobError
-    from .io import write_all_or_nothing
+    from .atomic import write_all_or_nothing
 
     directory = Path(directory)
     summary = json.loads((directory / f"{name}.report.json").read_text())
@@ -65,6 +65,15 @@ def write_report(directory: Path, name: str, cut: tuple[int, float] | None = Non
     page = render_html(summary, legend, mesh.points, tets, cells, cut)
     path = directory / f"{name}.report.html"
     return write_all_or_nothing([(path, lambda tmp: Path(tmp).write_text(page))])
+
+
+def report_targets(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarray, cells: dict, directory: Path,
+                   name: str) -> list:
+    """``name.report.json`` (the figures) and ``name.report.html`` (the page) in ``directory``, as (path, write)
+    targets for :func:`engine.atomic.write_all_or_nothing`; ``tets`` (m, 4)."""
+    page = render_html(summary, legend, points, tets, cells)
+    return [(Path(directory) / f"{name}.report.json", lambda tmp: Path(tmp).write_text(json.dumps(summary, indent=1))),
+            (Path(directory) / f"{name}.report.html", lambda tmp: Path(tmp).write_text(page))]
 
 
 def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarray, cells: dict,

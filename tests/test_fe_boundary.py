@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from engine.fe import SIDE_NODES, TET10_EDGES, tet_boundary
-from engine.io import FEModel, write_mesh
+from engine.atomic import write_all_or_nothing
+from engine.io import FEModel, mesh_targets
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
 from engine.mesh import TetMesh
@@ -96,7 +97,8 @@ def test_every_boundary_face_in_every_format_is_a_face_of_a_tet(root, case, orde
     job, mesh, geometry, features = meshed(case, root)
     job = job_from_dict({**job.raw, "output": {"order": order}})
     folder = root / f"{case}-{order}"
-    write_mesh(fe_model(job, mesh, geometry, features), folder, "mesh", ["msh", "inp", "vtu", "med"])
+    model = fe_model(job, mesh, geometry, features)
+    write_all_or_nothing(mesh_targets(model, folder, "mesh", ["msh", "inp", "vtu", "med"]))
     kind = "tetra10" if order == 2 else "tetra"
     msh = meshio.read(folder / "mesh.msh")
     faces = np.vstack([c.data for c in msh.cells if c.type == ("triangle6" if order == 2 else "triangle")])

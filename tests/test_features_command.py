@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from engine.cli import main
-from engine.describe import describe
+from engine.features import describe
 
 
 def run(capsys, *argv) -> tuple[int, str, str]:

@@ -20,9 +20,8 @@ from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
-from ..describe import describe
+from ..features import conformal_map, describe
 from ..errors import GeometryError
-from ..features import conformal_map
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delaunay is local)
