@@ -1,7 +1,7 @@
 """CAD input (issue 17): STEP files written by Gmsh's OpenCASCADE here, read back through engine/cad.py.
 
 Parts: a box with two holes, the corpus's filleted bracket and lofted handle (tests/parts/make_parts.py), the
-plate-cylinder junction, two boxes apart and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
+plate-cylinder junction, a hole whose wall is two faces, two boxes apart and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
 fillets with the CAD's radii, the junction's concave circle, exact surfaces (mesh nodes and 10-node
 mid-nodes on the CAD faces), the volume against the CAD's, the pipeline's gate and files, and the STEP
 part against its STL export.
@@ -9,6 +9,7 @@ part against its STL export.
 from __future__ import annotations
 
 import importlib.util
+import math
 from pathlib import Path
 
 import gmsh
@@ -44,6 +45,14 @@ def two_boxes():
     occ.addBox(40, 0, 0, 30, 30, 20)
 
 
+def split_hole():
+    """A 60 x 40 x 10 plate with a hole of radius 6 whose wall is two half-cylinder faces (as exporters split
+    periodic faces)."""
+    halves = [occ.addCylinder(30, 20, -1, 0, 0, 12, 6, angle=math.pi) for _ in range(2)]
+    occ.rotate([(3, halves[1])], 30, 20, 0, 0, 0, 1, math.pi)
+    return make_parts._cut(occ.addBox(0, 0, 0, 60, 40, 10), *halves)
+
+
 def apart():
     """Two boxes 10 apart, one with a hole."""
     occ.addBox(0, 0, 0, 40, 30, 20)
@@ -51,7 +60,8 @@ def apart():
 
 
 PARTS = {"box_with_holes": box_with_holes, "bracket": make_parts.bracket, "junction": junction,
-         "two_boxes": two_boxes, "apart": apart, "lofted_handle": make_parts.lofted_handle}
+         "two_boxes": two_boxes, "apart": apart, "split_hole": split_hole,
+         "lofted_handle": make_parts.lofted_handle}
 
 
 @pytest.fixture(scope="module")
@@ -92,6 +102,12 @@ def test_faces_are_named_patches_with_kinds_from_their_types(step_files):
     fillets = [p for p in bracket.patches if "fillet" in p.kinds]
     assert [p.cylinder.radius for p in fillets] == [8.0]
     assert sorted(p.cylinder.radius for p in bracket.patches if "hole" in p.kinds) == [4.0] * 4
+
+
+def test_a_hole_split_into_two_faces_is_one_hole(step_files):
+    _, _, features = solid_features(step_files["split_hole"][0])
+    (hole,) = [p for p in features.patches if p.surface == "Cylinder"]
+    assert len(hole.names) == 2 and hole.kinds == ["hole"] and hole.cylinder.radius == 6.0
 
 
 def test_junction_is_a_concave_circle(step_files):
