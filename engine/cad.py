@@ -170,7 +170,7 @@ def _build(path: str) -> None:
         raise GeometryError(f"not a readable CAD file ({exc})", where=path,
                             fix="check that the file is a valid STEP, IGES or BREP model") from None
     if not any(dim == 3 for dim, _ in shapes):
-        occ.healShapes(shapes)
+        occ.healShapes()         # all entities: given the imported faces only, OpenCASCADE makes no solid
     solids = occ.getEntities(3)
     if len(solids) > 1:
         occ.fragment(solids, [])
@@ -250,6 +250,8 @@ def _tessellate(gm, mesher: bool = False):
                   for tag, (types, _, nodes) in blocks]
         gm.mesh.clear()
     else:
+        for name in {gm.getEntityName(2, tag) for _, tag in gm.getEntities(2)} - {""}:
+            gm.removeEntityName(name)   # the STL names each face's solid by its name, if any, else by its tag
         with tempfile.TemporaryDirectory() as folder, _options({
                 "Mesh.Binary": 0, "Mesh.StlOneSolidPerSurface": 1, "Mesh.StlLinearDeflectionRelative": 0,
                 "Mesh.StlLinearDeflection": DEFLECTION * diagonal, "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE)}):

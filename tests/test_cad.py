@@ -53,6 +53,12 @@ def split_hole():
     return make_parts._cut(occ.addBox(0, 0, 0, 60, 40, 10), *halves)
 
 
+def faces_only():
+    """The faces of a 10 x 20 x 30 box with a hole of radius 3, without the solid."""
+    make_parts._cut(occ.addBox(0, 0, 0, 10, 20, 30), occ.addCylinder(5, 5, -1, 0, 0, 32, 3))
+    occ.remove(occ.getEntities(3))
+
+
 def apart():
     """Two boxes 10 apart, one with a hole."""
     occ.addBox(0, 0, 0, 40, 30, 20)
@@ -61,7 +67,7 @@ def apart():
 
 PARTS = {"box_with_holes": box_with_holes, "bracket": make_parts.bracket, "junction": junction,
          "two_boxes": two_boxes, "apart": apart, "split_hole": split_hole,
-         "lofted_handle": make_parts.lofted_handle}
+         "faces_only": faces_only, "lofted_handle": make_parts.lofted_handle}
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +87,7 @@ def step_files(tmp_path_factory):
             occ.synchronize()
             path = folder / f"{name}.step"
             gmsh.write(str(path))         # OpenCASCADE's STEP writer prints its statistics
-            out[name] = (path, sum(occ.getMass(3, tag) for _, tag in occ.getEntities(3)))
+            out[name] = (path, sum(occ.getMass(3, tag) for _, tag in occ.getEntities(3)) or None)
             gmsh.model.remove()
     finally:
         if previous in gmsh.model.list():
@@ -172,3 +178,9 @@ def test_step_lengths_are_read_in_millimetres(step_files, tmp_path):
     _, geometry, features = solid_features(metres)
     assert geometry.bounds[1] == pytest.approx([100e3, 60e3, 20e3])
     assert sorted(p.cylinder.radius for p in features.patches if "hole" in p.kinds) == pytest.approx([4e3, 6e3])
+
+
+def test_a_file_of_faces_is_healed_into_a_solid(step_files):
+    _, geometry, features = solid_features(step_files["faces_only"][0])
+    assert geometry.volume == pytest.approx(10 * 20 * 30 - math.pi * 3 ** 2 * 30, rel=2e-3)
+    assert [p.cylinder.radius for p in features.patches if "hole" in p.kinds] == [3.0]
