@@ -136,13 +136,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     features = commands.add_parser("features", help="list the corners, curves and patches of a solid, with their "
                                    "kinds, sizes and places (no meshing)",
-                                   description="FILE_OR_JOB is a surface file (STL, OBJ, PLY, OFF, GLB) or a job file "
+                                   description="FILE_OR_JOB is a surface file (STL, OBJ, PLY, OFF, GLB), a CAD file (STEP, IGES, "
+                                               "BREP) or a job file "
                                                "(its solid: built-in shape or file, named features, feature angle, "
                                                "knowledge). Lists every corner, curve and patch: id, names, feature "
                                                "kinds (hole, fillet, junction, re-entrant-edge, ...), size (curve: "
-                                               "length L and circle radius r; patch: area A and cylinder radius r), "
+                                               "length L and circle radius r; patch: a CAD face's type, area A and cylinder "
+                                               "or fillet radius r), "
                                                "centroid and bounding box")
-    features.add_argument("target", metavar="FILE_OR_JOB", help="surface file or job YAML file")
+    features.add_argument("target", metavar="FILE_OR_JOB", help="surface file, CAD file or job YAML file")
     features.add_argument("--feature-angle", type=_angle, metavar="DEGREES",
                           help="dihedral angle above which an edge is a feature edge (default: the job's, or 30)")
     features.add_argument("--knowledge", type=Path, action="append", default=[],
