@@ -106,10 +106,13 @@ def render_html(summary: dict, legend: dict, points: np.ndarray, tets: np.ndarra
                             f"[{c['band'][0]}, {c['band'][1]}]"),
     ]
     if b:
-        rows.append(("boundary (pymeshlab)", f"{b['triangles']:,} triangles, "
+        there, back = b["hausdorff_input_to_mesh"], b["hausdorff_mesh_to_input"]
+        rows.append(("boundary", f"{b['triangles']:,} triangles, "
                      f"{'two-manifold' if b['two_manifold'] else 'NOT two-manifold'}, {b['boundary_edges']} open edges; "
-                     f"Hausdorff to the input max {b['hausdorff_input_to_mesh']['max']:.4g}, "
-                     f"mean {b['hausdorff_input_to_mesh']['mean']:.4g}"))
+                     f"Hausdorff input → mesh max {there['max']:.4g} ({there['max_over_h']:.3g} h), mean "
+                     f"{there['mean']:.4g}; mesh → input max {back['max']:.4g} ({back['max_over_h']:.3g} h), mean "
+                     f"{back['mean']:.4g}"))
+    rows += [("warning", warning) for warning in summary.get("warnings", [])]
     patterns = [(p["id"], p["pattern"], _feature_name(legend, p), p["placement"],
                  f"{100 * np.mean(cells['winner'] == p['index']):.1f} %") for p in legend["patterns"]]
     table = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows)

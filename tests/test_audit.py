@@ -1,6 +1,7 @@
 """The audit: every element's size traced to the pattern, zone, placement and rule behind it."""
 from __future__ import annotations
 
+import html
 import json
 import re
 from pathlib import Path
@@ -112,3 +113,6 @@ def test_a_placed_pattern_that_wins_no_element_is_a_warning_in_the_log_and_the_r
     far = next(w for w in logged if "'far-away'" in w)
     assert f"{job}:" in coarse and "membership is > 0 at" in coarse and "higher" in coarse
     assert "membership is 0 at every element" in far
+    page = (tmp_path / "out" / "mesh.report.html").read_text()
+    assert all(html.escape(warning) in page for warning in logged), "each warning is a row of the HTML report"
+    assert "mesh → input max" in page, "the report gives both Hausdorff directions"
