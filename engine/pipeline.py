@@ -190,7 +190,13 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
         packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
     with stage("meshing", timings):
-        mesh = mesher(packing, geometry, features, seed=job.seed)
+        try:
+            mesh = mesher(packing, geometry, features, seed=job.seed)
+        except RuntimeError as error:    # the nodes do not make a mesh of this solid
+            raise MeshRejected(f"the {job.mesher} mesher made no valid mesh of the {len(packing)} nodes of the "
+                               f"{job.packer} packer: {error}", check="meshing",
+                               fix="if the job replaces the population rules or uses a plug-in packer or mesher, "
+                                   "check them; else mesh again with another seed and report the input") from None
     log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)", job.mesher,
              len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
              100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])

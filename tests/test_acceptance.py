@@ -162,3 +162,24 @@ def test_a_10_node_element_below_the_floor_is_refused(tmp_path):
     jacobians[7] = 0.5 * tolerances.quadratic_jacobian
     with pytest.raises(MeshRejected, match="10-node element validity"):
         check_mesh(result.mesh, result.geometry, result.features, elements, result.boundary, tolerances, jacobians)
+
+
+def test_population_rules_that_delete_every_bubble_give_no_mesh(capsys, tmp_path):
+    """The issue's expert case: a job's own population rules (overrides: true) with the delete threshold at 0.
+    The packer then leaves too few nodes for a mesh of the solid: one line, exit 4, no files (it was an
+    internal error, exit 3, and with milder thresholds a broken mesh with exit 0)."""
+    from pathlib import Path
+
+    shipped = (Path(__file__).parents[1] / "knowledge" / "population.yaml").read_text()
+    assert shipped.count("action: {output: q, threshold: 0.45,") == 1 and shipped.count("id: population\n") == 1
+    rules = shipped.replace("action: {output: q, threshold: 0.45,", "action: {output: q, threshold: 0.0,")
+    (tmp_path / "rules").mkdir()
+    overriding = rules.replace("id: population\n", "id: population\noverrides: true\n")
+    (tmp_path / "rules" / "population.yaml").write_text(overriding)
+    job = _job(tmp_path, {"geometry": {"shape": "plate_cylinder_junction"}, "size": 10.0}, knowledge=None)
+    job.write_text(job.read_text() + "knowledge: [rules]\n")
+    code = main(["mesh", str(job)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 4 and err.startswith("fuzzymesh: error: mesh rejected ("), err
+    assert "(meshing)" not in err or "population rules" in err, "a meshing failure names the rules to check"
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
