@@ -8,7 +8,10 @@
    kept, tagged ``steiner``, and counted.
 3. IN/OUT: regions of tets between the boundary triangles are classified by
    the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``).
-4. Quality improvement (``improve.py``); boundary nodes never move.
+4. Quality improvement (``improve.py``): boundary nodes move only in the
+   last relocation pass (sliding on the surface and put back onto it); what
+   is still under the floor is repaired by peels, collapses and swaps, then
+   Gmsh's optimiser and the relocation run once more, and the repairs again.
 """
 from __future__ import annotations
 
@@ -20,13 +23,16 @@ import numpy as np
 from ..mesh import STEINER, TetMesh, signed_volumes
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
-from .improve import FLOOR, TARGET, gmsh_optimize, min_dihedrals, peel_boundary_slivers, quality_below, relocate
+from .improve import (FLOOR, TARGET, collapse_bad_nodes, gmsh_optimize, min_dihedrals, peel_boundary_slivers,
+                      quality_below, relocate, swap_bad_faces)
 from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
 log = logging.getLogger(__name__)
 
 RESTORE_ROUNDS = 4   # rounds of putting back slid nodes whose tets turned non-positive
+SURFACE_TOLERANCE = 0.05   # x h: how far from the input surface a peel or collapse may put boundary faces
+REPAIR_ROUNDS = 4    # rounds of peels, collapses and swaps of what is still under the floor
 
 
 @register_mesher("delaunay")
@@ -71,8 +77,17 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         slid = np.flatnonzero(moved & surface_node)
         points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
-    tets, boundary, patch, peeled = peel_boundary_slivers(points, tets, boundary, surface.patch, FLOOR,
-                                                          removable=surface_node)
+    h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])   # Steiner nodes stay inside
+    repair = _Repair(surface_node, surface_node | (level == VOLUME) | (level == STEINER), _on_surface(geometry),
+                     SURFACE_TOLERANCE * h)
+    tets, boundary, patch = repair(points, tets, boundary, surface.patch)
+    if quality_below(points, tets, FLOOR).any():
+        # relocation and the repairs change the tets Gmsh's swaps saw: they may now take what is left
+        points, tets = gmsh_optimize(points, tets, fixed)
+        points, more = relocate(points, tets, slide[0], seed)
+        moves += more
+        tets, boundary, patch = repair(points, tets, boundary, patch)
+    peeled, collapsed = repair.peeled, repair.collapsed
     seconds["improve"] = time.perf_counter() - start
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
@@ -83,6 +98,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
              "steiner_points": len(steiner), "hull_tets": hull_tets, "outside_tets_dropped": hull_tets - len(tets),
              "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
              "min_dihedral_before_improvement": before, "relocated_nodes": moves, "boundary_slivers_removed": peeled,
+             "nodes_collapsed": collapsed, "faces_swapped": repair.swapped,
              "seconds": {k: round(v, 3) for k, v in seconds.items()}}
     log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement from "
               "min dihedral %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
@@ -107,6 +123,40 @@ def _slide_directions(points, level, entity, geometry, features):
     every[sliding] = geometry.mesh.face_normals[face]
     slide[on_patch[planar]] = every[on_patch[planar]]
     return slide, every
+
+
+class _Repair:
+    """Peels, collapses and swaps (improve.py) of what is still under the floor, in rounds; counts them.
+
+    Peels and collapses move boundary faces: the new ones must face outward as the input surface does
+    and be no farther from it than the old ones or than ``tolerance`` (per node)."""
+
+    def __init__(self, removable, collapsible, on_surface, tolerance):
+        self.removable, self.collapsible = removable, collapsible
+        self.on_surface, self.tolerance = on_surface, tolerance
+        self.peeled = self.collapsed = self.swapped = 0
+
+    def __call__(self, points, tets, boundary, patch):
+        for _ in range(REPAIR_ROUNDS):
+            tets, boundary, patch, peeled = peel_boundary_slivers(
+                points, tets, boundary, patch, FLOOR, self.removable, self.on_surface, self.tolerance)
+            tets, boundary, patch, collapsed = collapse_bad_nodes(
+                points, tets, boundary, patch, FLOOR, self.collapsible, self.on_surface, self.tolerance)
+            tets, swapped = swap_bad_faces(points, tets, FLOOR)
+            self.peeled += peeled
+            self.collapsed += collapsed
+            self.swapped += swapped
+            if not peeled + collapsed + swapped:
+                break
+        return tets, boundary, patch
+
+
+def _on_surface(geometry):
+    """points -> (their distances to the input surface, its outward unit normals at the closest points)."""
+    def at(points):
+        _, distance, face = geometry.closest_point(points)
+        return distance, geometry.mesh.face_normals[face]
+    return at
 
 
 def _positive(points, before, tets, moved) -> np.ndarray:
