@@ -300,3 +300,43 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
     assert rotated(boundary) == rotated(TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64))
                                         .boundary_faces())
     assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}
+
+
+def test_an_inner_edge_of_needles_is_swapped_away():
+    """Three needles around an inner edge (radius ratio 0.08, under the floor) become the two tets of the
+    triangle around it: same volume, same free faces."""
+    from engine.mesh import TetMesh, signed_volumes
+    from engine.meshing.improve import FLOOR, min_dihedrals, swap_bad_faces
+    from engine.meshing.tetra import orient
+
+    angles = np.radians([90, 210, 330])
+    points = np.vstack([np.column_stack([np.cos(angles), np.sin(angles), np.zeros(3)]), [[0, 0, 3], [0, 0, -3]]])
+    tets, _ = orient(points, np.array([[3, 4, 0, 1], [3, 4, 1, 2], [3, 4, 2, 0]]))
+    swapped, flips = swap_bad_faces(points, tets, FLOOR)
+    assert flips == 1 and len(swapped) == 2 and min_dihedrals(points, swapped).min() > 60
+    assert signed_volumes(points, swapped).sum() == pytest.approx(signed_volumes(points, tets).sum())
+
+    def free(t):
+        return {tuple(sorted(f)) for f in TetMesh(points, t, np.zeros(5, np.int8), np.zeros(5, np.int64))
+                .boundary_faces().tolist()}
+
+    assert free(swapped) == free(tets)
+
+
+def test_a_crowded_surface_node_is_collapsed_along_a_boundary_edge():
+    """A surface node 0.03 from a corner (its three tets flat) merges into the corner along their shared
+    boundary edge: one tet is left, its boundary the tet's four faces, outward."""
+    from engine.mesh import TetMesh
+    from engine.meshing.improve import FLOOR, collapse_bad_nodes
+    from engine.meshing.tetra import orient
+
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.02, 0.02, 0.0]])
+    tets, _ = orient(points, np.array([[4, 1, 2, 3], [4, 2, 0, 3], [4, 0, 1, 3]]))
+    boundary = TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+    patch = np.zeros(len(boundary), np.int64)
+    collapsible = np.array([False, False, False, False, True])
+    tets, boundary, patch, collapsed = collapse_bad_nodes(points, tets, boundary, patch, FLOOR, collapsible)
+    assert collapsed == 1 and len(tets) == 1 and len(boundary) == len(patch) == 4
+    assert {tuple(np.roll(f, -int(np.argmin(f)))) for f in boundary.tolist()} == \
+        {tuple(np.roll(f, -int(np.argmin(f)))) for f in TetMesh(points, tets, np.zeros(5, np.int8),
+                                                                np.zeros(5, np.int64)).boundary_faces().tolist()}
