@@ -152,6 +152,16 @@ def build_parser() -> argparse.ArgumentParser:
     features.add_argument("--json", action="store_true", help="print JSON instead of the table")
     features.set_defaults(run=_cmd_features)
 
+    rules = commands.add_parser("rules", help="export rule bases (e.g. to IEC 61131-7 FCL)")
+    rule_verbs = rules.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
+    export = rule_verbs.add_parser("export", help="write a rule base, or every rule base of a rule file, as FCL; "
+                                                  "annotations keep what FCL cannot hold (docs/rules.md, FCL)")
+    export.add_argument("rulebase", help="a rule base id (population.delete) or a rule file id (population)")
+    export.add_argument("--fcl", action="store_true", required=True, help="write IEC 61131-7 FCL (the one format)")
+    export.add_argument("-o", "--output", type=Path, help="the file to write (default: standard output)")
+    export.add_argument("--knowledge", type=Path, action="append", default=[], help="extra knowledge files or folders")
+    export.set_defaults(run=_cmd_rules_export)
+
     for noun in ("patterns", "recipes"):
         sub = commands.add_parser(noun, help=f"list or show the {noun} of the knowledge base")
         verbs = sub.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
@@ -315,6 +325,27 @@ def _cmd_validate(args) -> int:
     print(paths[1].read_text())
     for path in paths:
         print(f"wrote {path}")
+    return 0
+
+
+def _cmd_rules_export(args) -> int:
+    from .atomic import write_all_or_nothing
+    from .fcl import to_fcl
+    from .knowledge import load_knowledge
+
+    kb = load_knowledge(args.knowledge)
+    whole_file = args.rulebase not in kb.rulebases     # a rule file id: all its rule bases and its packer settings
+    file_id = args.rulebase if whole_file else args.rulebase.rsplit(".", 1)[0]
+    bases = [base for name, base in kb.rulebases.items()
+             if (name.rsplit(".", 1)[0] == file_id if whole_file else name == args.rulebase)]
+    if not bases:
+        raise FuzzymeshError(f"no rule base or rule file '{args.rulebase}'",
+                             fix=f"known rule bases: {', '.join(sorted(kb.rulebases))}")
+    text = to_fcl(bases, file_id, kb.packer_settings.get(file_id) if whole_file else None)
+    if args.output is None:
+        sys.stdout.write(text)
+    else:
+        write_all_or_nothing([(args.output, lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))])
     return 0
 
 

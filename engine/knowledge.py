@@ -18,11 +18,13 @@ from .acceptance import Tolerances
 from .errors import FuzzymeshError, KnowledgeError
 from .anchors import RegionDistance
 from .expr import Expression, ExpressionError
+from .fcl import load_fcl
 from .fuzzy import Rule, RuleBase, Term, Variable
 from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, finite, in_range, positive, validate
 from .yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
+KNOWLEDGE_SUFFIXES = (".yaml", ".yml", ".fcl")   # .fcl: rule files in FCL (engine/fcl.py)
 ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap", "curvature")
 LAWS = ("constant", "linear", "geometric", "power")
 SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap", "wall_thickness", "gap_width",
@@ -643,7 +645,7 @@ class KnowledgeBase:
     packer_settings: dict[str, dict] = field(default_factory=dict)   # rule file id -> its packer settings
 
     def add_file(self, path: Path) -> None:
-        raw = load_yaml(path, KnowledgeError)
+        raw = load_fcl(path) if Path(path).suffix == ".fcl" else load_yaml(path, KnowledgeError)
         source = str(path)
         if not isinstance(raw, Located):
             raise _err("a knowledge file must be a YAML mapping with 'kind:'", f"{source}:1:1")
@@ -773,7 +775,7 @@ def yaml_files(paths) -> list[Path]:
     files = []
     for path in map(Path, paths):
         if path.is_dir():
-            files += sorted(p for p in path.rglob("*") if p.suffix in (".yaml", ".yml"))
+            files += sorted(p for p in path.rglob("*") if p.suffix in KNOWLEDGE_SUFFIXES)
         else:
             files.append(path)
     return files
