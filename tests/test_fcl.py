@@ -11,7 +11,6 @@ import pytest
 import yaml
 
 from engine.cli import main
-from engine.errors import KnowledgeError
 from engine.fcl import parse_fcl, to_fcl
 from engine.job import load_job
 from engine.knowledge import lint, load_knowledge, load_rules
