@@ -33,6 +33,7 @@ HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5     # no node is added nearer than this x h to another
+STRAY_GAP = 0.2   # ... but an input vertex the triangles pass far from (a drill point's tip) down to this x h
 NO_BUBBLE = -1    # the bubble id of a node the mesher adds
 ON_EDGE = 1e-9    # barycentric roundoff within which a point on a chart's border lies on its triangle
 
@@ -321,6 +322,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     point = np.where(in_triangle[:, None], centre, np.where(on_border[:, None], (a + b + c) / 3, middle))
     # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
     badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
+    stray = np.zeros(len(point), bool)    # which points are input vertices (_stray_vertices)
     if chart.kind != "plane":
         lifted = chart.lift(point)
         corners = chart.lift(np.vstack([a, b, c])).reshape(3, -1, 3)
@@ -333,18 +335,19 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
             vertex_uv, vertex_badness, vertex_h = _stray_vertices(chart, uv, tri, corners[0], normal, h)
             point, badness, h = (np.concatenate([point, vertex_uv]), np.concatenate([badness, vertex_badness]),
                                  np.concatenate([h, vertex_h]))
+            stray = np.r_[stray, np.ones(len(vertex_uv), bool)]
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
         return np.zeros((0, 2)), np.zeros(0)
     big = big[np.argsort(-badness[big], kind="stable")]
-    point, spacing = point[big], h[big]
+    point, spacing, stray = point[big], h[big], stray[big]
     present = uv[np.setdiff1d(np.arange(len(uv)), crowded)]
     if chart.turn is not None:   # back into the turn; nodes across the seam count as neighbours
         point[:, 0] -= chart.turn * np.round(point[:, 0] / chart.turn)
         present = np.vstack([present, present + [chart.turn, 0.0], present - [chart.turn, 0.0]])
         # an edge across the seam spans the whole strip here: not a border to keep off
         constraints = constraints[np.abs(np.diff(uv[constraints, 0], axis=1)[:, 0]) < chart.turn / 2]
-    keep = cKDTree(present).query(point)[0] > MIN_GAP * spacing
+    keep = cKDTree(present).query(point)[0] > np.where(stray, STRAY_GAP, MIN_GAP) * spacing
     keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
                    np.r_[2 * radius, spacing]) - len(uv)] = False
     point, spacing = point[keep], spacing[keep]
