@@ -55,7 +55,7 @@ class CadModel:
         import gmsh
 
         if not gmsh.isInitialized():
-            gmsh.initialize(["-noenv"], readConfigFiles=False)
+            gmsh.initialize(["-noenv"], readConfigFiles=False, interruptible=False)   # see tetra.gmsh_session
             gmsh.option.setNumber("General.Terminal", 0)
         previous = gmsh.model.getCurrent()
         if self.name in gmsh.model.list():

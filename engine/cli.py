@@ -152,6 +152,22 @@ def build_parser() -> argparse.ArgumentParser:
     features.add_argument("--json", action="store_true", help="print JSON instead of the table")
     features.set_defaults(run=_cmd_features)
 
+    batch = commands.add_parser("batch", help="mesh every variant of a study (a parameter grid or a folder of "
+                                "parts) on dask.distributed (needs the 'batch' extra)",
+                                description="STUDY is a study file (docs/batch.md): a base job and what varies. "
+                                            "Writes every variant's outputs to <study folder>/variants/NAME and the "
+                                            "table study.csv / study.parquet and the page study.html; a variant whose "
+                                            "job is unchanged and whose outputs are complete is not meshed again. "
+                                            "Exit 0 when the table is written, whatever the variants' status")
+    batch.add_argument("study", type=Path, metavar="STUDY", help="study YAML file")
+    batch.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask cluster, e.g. tcp://HOST:8786 "
+                       "(default: DASK_SCHEDULER_ADDRESS, else a local cluster)")
+    batch.add_argument("--workers", type=int, metavar="N", help="local cluster: N worker processes (default: one per core)")
+    batch.add_argument("--retries", type=int, default=0, metavar="N",
+                       help="let Dask run a variant that ended in an internal fault or a lost worker N more times")
+    batch.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
+    batch.set_defaults(run=_cmd_batch)
+
     rules = commands.add_parser("rules", help="export rule bases (e.g. to IEC 61131-7 FCL)")
     rule_verbs = rules.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
     export = rule_verbs.add_parser("export", help="write a rule base, or every rule base of a rule file, as FCL; "
@@ -396,6 +412,18 @@ def _describe_recipe(recipe) -> str:
         roles = "".join(f", {k} -> '{v}'" for k, v in p.roles.items())
         lines.append(f"  {p.pattern} {where}{extra}{roles}  ({p.source})")
     return "\n".join(lines)
+
+
+def _cmd_batch(args) -> int:
+    from .batch import batch
+
+    if args.workers is not None and args.workers < 1 or args.retries < 0:
+        raise FuzzymeshError("--workers must be at least 1 and --retries at least 0", fix="e.g. --workers 2")
+    rows, files = batch(args.study, args.scheduler, args.workers, args.retries)
+    counts = ", ".join(f"{sum(r['status'] == s for r in rows)} {s}" for s in ("ok", "refused", "rejected", "failed"))
+    log.info("%d variants: %s (%d from earlier runs); wrote %s", len(rows), counts,
+             sum(bool(r.get("cached")) for r in rows), ", ".join(map(str, files)))
+    return 0
 
 
 def _cmd_mesh(args) -> int:

@@ -14,11 +14,14 @@ FLAT = 1e-10   # |6 x volume| below this x (edge length)^3: a flat tetrahedron
 
 
 def gmsh_session() -> None:
-    """Initialise Gmsh once, quietly, with HXT as the 3-D kernel (the one that takes constraints)."""
+    """Initialise Gmsh once, quietly, with HXT as the 3-D kernel (the one that takes constraints).
+
+    Not ``interruptible``: Gmsh would set SIGINT's handler, which only the main thread may (a Dask worker meshes
+    in a thread), and Ctrl-C would then kill the process before the output's temporary files are removed."""
     import gmsh
 
     if not gmsh.isInitialized():
-        gmsh.initialize(readConfigFiles=False)
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.Verbosity", 0)
     gmsh.option.setNumber("Mesh.Algorithm3D", 10)
