@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import NODE_LEVELS, TetMesh
+from .levels import NODE_LEVELS
+from .mesh import TetMesh
 from .quality import EDGES
 
 FORMAT = "fuzzymesh-audit/1"

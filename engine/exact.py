@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import NODE_LEVELS, signed_volumes
+from .levels import Level
+from .mesh import signed_volumes
 
 EXACT_TOLERANCE = 1e-6   # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
 ROUNDS = 8               # alternating projections onto the surfaces a curve borders
@@ -257,7 +258,7 @@ def on_exact_surfaces(mesh, geometry, features):
     along = curve_surfaces(geometry, features, surfaces)
     points = mesh.points.copy()
     for level, table in (("patch", [[s] if s is not None else [] for s in surfaces]), ("curve", along)):
-        nodes = np.flatnonzero((mesh.node_level == NODE_LEVELS.index(level)) & (mesh.node_entity >= 0))
+        nodes = np.flatnonzero((mesh.node_level == Level[level.upper()]) & (mesh.node_entity >= 0))
         for entity in np.unique(mesh.node_entity[nodes]):
             if table[entity]:
                 mine = nodes[mesh.node_entity[nodes] == entity]

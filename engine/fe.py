@@ -21,11 +21,11 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from .exact import curve_surfaces, exact_surfaces, onto_intersection
-from .mesh import FACES, NODE_LEVELS, TetMesh
+from .levels import CORNER, CURVE
+from .mesh import FACES, TetMesh
 from .meshing.surface import arc_parameter
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 
-CORNER, CURVE = NODE_LEVELS.index("corner"), NODE_LEVELS.index("curve")
 TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
 # (4, 6) per side k of a tet (FACES[k]): its corners and its edges' mid-nodes, 10-node local indices in triangle6 order
 SIDE_NODES = np.array([[*f, *(4 + TET10_EDGES.tolist().index(sorted((f[i], f[(i + 1) % 3]))) for i in range(3))]

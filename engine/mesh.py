@@ -14,15 +14,13 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
 
 
-NODE_LEVELS = ("corner", "curve", "patch", "volume", "steiner")   # the packing's levels, then mesher-added nodes
-STEINER = 4
 
 
 @dataclass
 class TetMesh:
     """Linear tetrahedra with node tags and, where the mesher conforms to the surface, tagged boundary faces.
 
-    ``node_level`` indexes NODE_LEVELS; ``node_entity`` is the corner / curve /
+    ``node_level`` is an :class:`engine.levels.Level`; ``node_entity`` is the corner / curve /
     patch index in the Features (-1 in the volume and for Steiner nodes).
     ``boundary`` triangles are outward and each lies on surface patch
     ``boundary_patch``; both are empty for a mesher that does not conform.

@@ -14,7 +14,7 @@ from engine.cli import main
 from engine.exact import CylinderSurface, curve_surfaces, exact_surfaces
 from engine.fe import TET10_EDGES, curve_edges, feature_groups, quadratic, row_index, tet_boundary
 from engine.io import ABAQUS_FACE
-from engine.mesh import NODE_LEVELS
+from engine.levels import NODE_LEVELS
 from engine.shapes import CHORDAL_ERROR
 from engine.quadratic import QUADRATIC_FLOOR, _gradients, scaled_jacobian
 from test_meshers import meshed, packed

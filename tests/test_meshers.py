@@ -11,7 +11,8 @@ import pytest
 
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
-from engine.mesh import NODE_LEVELS, TetMesh
+from engine.levels import NODE_LEVELS
+from engine.mesh import TetMesh
 from engine.meshing import get_mesher, mesher_names
 from engine.meshing.qhull import boundary_defects
 from engine.meshing.surface import arc_parameter

@@ -20,7 +20,8 @@ import time
 
 import numpy as np
 
-from ..mesh import STEINER, TetMesh, signed_volumes
+from ..levels import STEINER
+from ..mesh import TetMesh, signed_volumes
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
 from .improve import (FLOOR, TARGET, collapse_bad_nodes, gmsh_optimize, min_dihedrals, peel_boundary_slivers,

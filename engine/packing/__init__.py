@@ -10,11 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import numpy as np
 
+from ..levels import CORNER, CURVE, LEVELS, PATCH, VOLUME  # noqa: F401  (the packers' levels)
 from ..plugins import Packer
 from ..registry import Registry
 
-LEVELS = ("corner", "curve", "patch", "volume")
-CORNER, CURVE, PATCH, VOLUME = range(4)
 # one population-control event per row: the bubble deleted or inserted, its level, the packing
 # iteration, the action, the id of the rule that fired most strongly and its firing degree
 EVENT = np.dtype([("bubble", np.int64), ("level", "U6"), ("iteration", np.int32), ("action", "U6"),

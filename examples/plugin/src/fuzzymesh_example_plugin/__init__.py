@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from engine.mesh import NODE_LEVELS
+from engine.levels import NODE_LEVELS
 from engine.meshing import get_mesher
 from engine.packing import VOLUME, get_packer
 
