@@ -38,6 +38,7 @@ CAD_FORMATS = (".step", ".stp", ".iges", ".igs", ".brep")
 TURN_ANGLE = 10.0        # tessellation: degrees of turn per facet of a curved face
 DEFLECTION = 1e-3        # tessellation: largest sagitta, x the model size
 MESHER_SIZE = 40         # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
+HEAL_TOLERANCE = 1e-6    # x the model size: faces of a file without solids are sewn across gaps this wide
 SAME_SURFACE = 1e-6      # x the model size: two faces' parameters closer than this describe one surface
 NARROW = 1.0             # a cone narrower along its slant than this x its mean radius is a chamfer
 
@@ -163,14 +164,20 @@ def _build(path: str) -> None:
     import gmsh
 
     occ = gmsh.model.occ
-    gmsh.option.setString("Geometry.OCCTargetUnit", "MM")
+    previous = gmsh.option.getString("Geometry.OCCTargetUnit")
+    # STEP: millimetres asked for; IGES: OpenCASCADE's default, millimetres (its reader refuses the option)
+    gmsh.option.setString("Geometry.OCCTargetUnit", "MM" if Path(path).suffix.lower() in (".step", ".stp") else "")
     try:
         shapes = occ.importShapes(path)
     except Exception as exc:   # Gmsh raises a bare Exception with its last error
         raise GeometryError(f"not a readable CAD file ({exc})", where=path,
                             fix="check that the file is a valid STEP, IGES or BREP model") from None
-    if not any(dim == 3 for dim, _ in shapes):
-        occ.healShapes()         # all entities: given the imported faces only, OpenCASCADE makes no solid
+    finally:
+        gmsh.option.setString("Geometry.OCCTargetUnit", previous)
+    if not any(dim == 3 for dim, _ in shapes):   # all entities: given the imported faces, OpenCASCADE makes no solid
+        occ.synchronize()
+        lo, hi = np.reshape(gmsh.model.getBoundingBox(-1, -1), (2, 3))
+        occ.healShapes(tolerance=HEAL_TOLERANCE * float(np.linalg.norm(hi - lo)))
     solids = occ.getEntities(3)
     if len(solids) > 1:
         occ.fragment(solids, [])
