@@ -23,7 +23,6 @@ from scipy.sparse import csgraph
 from .exact import curve_surfaces, exact_surfaces, onto_intersection
 from .levels import CORNER, CURVE
 from .mesh import FACES, TetMesh
-from .meshing.surface import arc_parameter
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 
 TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
@@ -201,7 +200,7 @@ def quadratic(mesh: TetMesh, geometry, features,
         if along[c]:
             curved[rows] = onto_intersection(along[c], straight[rows])
         elif features.curves[c].sharp:
-            curved[rows] = features.curves[c].point_at(arc_parameter(features.curves[c], straight[rows]))
+            curved[rows] = features.curves[c].point_at(features.curves[c].parameter(straight[rows]))
         else:                         # a smooth cut's chords are curved onto the surface, like a patch's
             curved[rows] = geometry.closest_point(straight[rows])[0]
     points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10, floor)

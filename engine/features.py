@@ -80,6 +80,18 @@ class Curve:
     def length(self) -> float:
         return float(self.arc_length[-1])
 
+    def parameter(self, points: np.ndarray) -> np.ndarray:
+        """Arc length (k,) of the closest point on the curve to each of ``points`` (k, 3): exact (libigl AABB
+        over its segments), in [0, length) on a closed curve, so a point at its seam is at 0, not at its length."""
+        line = np.ascontiguousarray(self.polyline, dtype=np.float64)
+        points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        if len(points) == 0:
+            return np.zeros(0)
+        segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))]).astype(np.int64)
+        _, segment, closest = igl.point_mesh_squared_distance(points, line, segments)
+        s = self.arc_length[segment] + np.linalg.norm(closest - line[segment], axis=1)
+        return np.mod(s, self.length) if self.closed else s
+
     def point_at(self, s: np.ndarray) -> np.ndarray:
         """Points at arc lengths ``s`` (clipped to [0, length]; wrapped if closed)."""
         s = np.asarray(s, dtype=float)

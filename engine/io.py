@@ -11,7 +11,7 @@ import numpy as np
 from .atomic import Target
 from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
 from .mesh import TetMesh
-from .meshing.tetra import face_owners
+from .topology import face_owners
 
 ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}   # C3D4/C3D10 face by the local index of the opposite node
 

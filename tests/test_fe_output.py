@@ -197,3 +197,44 @@ def test_scaled_jacobian_bounds_det_j_from_below():
     folded = straight.copy()
     folded[4] += [0.2, 0.6, 0.6]   # edge 0-1's mid-node beyond the opposite face
     assert scaled_jacobian(folded, tets10)[0] < 0
+
+
+def test_closed_curves_parametrise_across_their_seam():
+    """Issue 15's quarter-point element: a chord touching a closed curve's seam vertex got the curve's whole
+    length as its arc parameter. Points at and just before the seam are at 0 and just under the length."""
+    from engine.features import Curve
+
+    angles = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    circle = Curve("c", np.column_stack([10 * np.cos(angles), 10 * np.sin(angles), 0 * angles]), True, None)
+    seam, before, after = circle.points[0], circle.point_at(circle.length - 0.1), circle.point_at(0.1)
+    s = circle.parameter(np.vstack([seam, before, after]))
+    assert s[0] == pytest.approx(0.0, abs=1e-9) and s[1] == pytest.approx(circle.length - 0.1) and s[2] == pytest.approx(0.1)
+
+
+def test_hole_rim_mid_nodes_sit_in_the_middle_of_their_arcs():
+    """Every 10-node chord of the plate's hole rims, the ones across the seam included, has its mid-node at
+    the middle of its arc (a quarter-point node ruins the stress at the rim)."""
+    from engine.job import job_from_dict
+    from engine.pipeline import run
+
+    result = run(job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 12.0, "output": {"order": 2}},
+                               base_dir=".", source="<test>"), write=False)
+    mesh, features = result.mesh, result.features
+    points, tets10, triangles6 = quadratic(mesh, result.geometry, features)
+    chords, curve = curve_edges(mesh, features, triangles6[:, :3])
+    tet_edges = np.sort(tets10[:, TET10_EDGES].reshape(-1, 2), axis=1)
+    middle = dict(zip(map(tuple, tet_edges.tolist()), tets10[:, 4:].reshape(-1).tolist()))
+    checked = 0
+    for c in np.unique(curve):
+        rim = features.curves[c]
+        if not rim.closed:
+            continue
+        ends = chords[curve == c]
+        s = rim.parameter(points[ends.ravel()]).reshape(-1, 2)
+        m = rim.parameter(points[[middle[tuple(sorted(e))] for e in ends.tolist()]])
+        span = np.mod(s[:, 1] - s[:, 0], rim.length)
+        span = np.where(span > rim.length / 2, span - rim.length, span)        # signed, the short way round
+        offset = np.mod(m - s[:, 0] + rim.length / 2, rim.length) - rim.length / 2
+        assert np.allclose(offset / span, 0.5, atol=0.05), rim.id
+        checked += len(ends)
+    assert checked > 20

@@ -15,7 +15,6 @@ from engine.levels import NODE_LEVELS
 from engine.mesh import TetMesh
 from engine.meshing import get_mesher, mesher_names
 from engine.meshing.qhull import boundary_defects
-from engine.meshing.surface import arc_parameter
 from engine.packing import CORNER, CURVE, EVENT, LEVELS, PATCH, VOLUME, get_packer, packer_names
 from engine.pipeline import build_geometry, build_sizing
 from engine.quality import surface_deviation, tet_quality
@@ -77,7 +76,7 @@ def check_packer_contract(packer: str, case: str = "l_bracket") -> None:
         for k in np.unique(packing.entity[on]):
             points = packing.points[on & (packing.entity == k)]
             if level == CURVE:
-                assert np.linalg.norm(entities[k].point_at(arc_parameter(entities[k], points)) - points,
+                assert np.linalg.norm(entities[k].point_at(entities[k].parameter(points)) - points,
                                       axis=1).max() < tolerance, f"nodes on curve {k}"
             else:
                 faces = geometry.mesh.faces[entities[k].faces].astype(np.int64)
@@ -115,7 +114,7 @@ def test_mesher_contract(mesher):
         on = mesh.points[curve_nodes[mesh.node_entity[curve_nodes] == index]]
         curve = features.curves[index]
         if curve.sharp:
-            closest = curve.point_at(arc_parameter(curve, on))
+            closest = curve.point_at(curve.parameter(on))
             assert np.linalg.norm(closest - on, axis=1).max() < 1e-9 * geometry.scale, "curve nodes on their curve"
         else:   # a smooth cut is no feature: its nodes may slide on the surface
             assert np.abs(geometry.signed_distance(on)).max() < 1e-9 * geometry.scale, "cut nodes on the surface"

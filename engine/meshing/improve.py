@@ -46,7 +46,8 @@ import numpy as np
 
 from .._numba import numba
 from ..mesh import FACES
-from .tetra import gmsh_session, node_stars
+from ..topology import node_stars
+from .tetra import gmsh_session
 
 GMSH_THRESHOLD = 0.5        # Gmsh optimises tets with gamma below this
 REGULAR_DIHEDRAL = 70.528779365509308

@@ -62,25 +62,12 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
         if not curve.on_surface or curve.vertices is None:
             continue
         nodes = by_curve.get(index, np.zeros(0, np.int64))
-        ordered = nodes[np.argsort(arc_parameter(curve, packing.points[nodes]), kind="stable")]
+        ordered = nodes[np.argsort(curve.parameter(packing.points[nodes]), kind="stable")]
         start = corner_at_vertex.get(int(curve.vertices[0]))
         end = None if curve.closed else corner_at_vertex.get(int(curve.vertices[-1]))
         chains[index] = np.concatenate([[start] if start is not None else [], ordered,
                                         [end] if end is not None else []]).astype(np.int64)
     return chains
-
-
-def arc_parameter(curve, points: np.ndarray) -> np.ndarray:
-    """Arc length along ``curve`` of the closest point to each of ``points`` (exact, libigl AABB over its
-    segments; in [0, length) on a closed curve, so a point at its seam is at 0, not at its length)."""
-    line = np.ascontiguousarray(curve.polyline, dtype=np.float64)
-    points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-    if len(points) == 0:
-        return np.zeros(0)
-    segments = np.column_stack([np.arange(len(line) - 1), np.arange(1, len(line))]).astype(np.int64)
-    _, segment, closest = igl.point_mesh_squared_distance(points, line, segments)
-    s = curve.arc_length[segment] + np.linalg.norm(closest - line[segment], axis=1)
-    return np.mod(s, curve.length) if curve.closed else s
 
 
 def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
@@ -182,7 +169,7 @@ def _coarse_chain_edges(nodes, features, chains) -> np.ndarray:
         if len(chain) < 2:
             continue
         ends = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
-        s = arc_parameter(curve, nodes.points[chain])
+        s = curve.parameter(nodes.points[chain])
         knots = curve.arc_length[1:-1]          # the curve's own vertices between its ends
         if curve.closed:    # the closing edge runs past the end, to the first node one turn on
             knots = np.concatenate([curve.arc_length[:-1], curve.arc_length[:-1] + curve.length])
@@ -212,7 +199,7 @@ def _split_chain_edges(nodes, features, chains, pairs):
         hit = np.array([tuple(sorted(pair)) in wanted for pair in ends.tolist()], dtype=bool)
         if not hit.any():
             continue
-        s = arc_parameter(curve, nodes.points[ends[hit].ravel()]).reshape(-1, 2)
+        s = curve.parameter(nodes.points[ends[hit].ravel()]).reshape(-1, 2)
         if curve.closed:   # the edge that closes the loop runs past the start
             s[:, 1] = np.where(s[:, 1] <= s[:, 0], s[:, 1] + curve.length, s[:, 1])
         points.append(curve.point_at(s.mean(axis=1)))

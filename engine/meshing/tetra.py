@@ -9,6 +9,7 @@ import numpy as np
 
 from .._numba import numba
 from ..mesh import FACES, signed_volumes
+from ..topology import find_face, node_stars
 
 FLAT = 1e-10   # |6 x volume| below this x (edge length)^3: a flat tetrahedron
 
@@ -65,27 +66,6 @@ def orient(points: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return tets, np.abs(vol)
 
 
-def node_stars(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR of the tets around each node: tets star[start[v]:start[v + 1]] contain node v."""
-    return _node_stars(np.ascontiguousarray(tets, dtype=np.int64), n)
-
-
-@numba.njit(cache=True)
-def _node_stars(tets, n):
-    start = np.zeros(n + 1, np.int64)
-    for v in tets.ravel():
-        start[v + 1] += 1
-    start = np.cumsum(start)
-    fill = start[:-1].copy()
-    star = np.empty(tets.size, np.int64)
-    for t in range(len(tets)):
-        for k in range(4):
-            v = tets[t, k]
-            star[fill[v]] = t
-            fill[v] += 1
-    return start, star
-
-
 def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarray) -> np.ndarray:
     """Which tets lie inside the closed, outward-oriented ``boundary`` triangulation (faces of the tets).
 
@@ -106,25 +86,6 @@ def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarra
 
 
 @numba.njit(cache=True)
-def _find_face(tets, start, star, a, b, c, skip):
-    """The tet other than ``skip`` with nodes a, b, c, and the local index of its fourth node; -1 if none."""
-    lo = min(a, min(b, c))
-    for s in star[start[lo]:start[lo + 1]]:
-        if s == skip:
-            continue
-        found, other = 0, -1
-        for j in range(4):
-            v = tets[s, j]
-            if v == a or v == b or v == c:
-                found += 1
-            else:
-                other = j
-        if found == 3:
-            return s, other
-    return -1, -1
-
-
-@numba.njit(cache=True)
 def _inside_by_boundary(points, tets, boundary, start, star, faces):
     m = len(tets)
     blocked = np.zeros((m, 4), np.bool_)
@@ -135,7 +96,7 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
         normal = np.cross(ab, ac)
         skip = -1
         for _ in range(2):
-            t, k = _find_face(tets, start, star, a, b, c, skip)
+            t, k = find_face(tets, start, star, a, b, c, skip)
             if t < 0:
                 break
             blocked[t, k] = True
@@ -163,7 +124,7 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
             if blocked[t, k]:
                 continue
             f = faces[k]
-            s, _ = _find_face(tets, start, star, tets[t, f[0]], tets[t, f[1]], tets[t, f[2]], t)
+            s, _ = find_face(tets, start, star, tets[t, f[0]], tets[t, f[1]], tets[t, f[2]], t)
             if s >= 0 and not outside[s]:
                 if vote[s] > 0:
                     conflicts += 1
@@ -217,20 +178,3 @@ def compact(points, tets, *node_arrays):
     used[tets.ravel()] = True
     new_index = np.where(used, np.cumsum(used) - 1, -1)
     return (points[used], new_index[tets], *[a[used] for a in node_arrays], new_index)
-
-
-def face_owners(tets: np.ndarray, n: int, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For each triangle, a tet that has it as a face and that tet's local index of the opposite node
-    (-1, -1 where none has)."""
-    tets = np.ascontiguousarray(tets, dtype=np.int64)
-    start, star = node_stars(tets, n)
-    return _face_owners(tets, start, star, np.ascontiguousarray(triangles, dtype=np.int64))
-
-
-@numba.njit(cache=True)
-def _face_owners(tets, start, star, triangles):
-    owner = np.full(len(triangles), -1, np.int64)
-    opposite = np.full(len(triangles), -1, np.int64)
-    for i in range(len(triangles)):
-        owner[i], opposite[i] = _find_face(tets, start, star, triangles[i, 0], triangles[i, 1], triangles[i, 2], -1)
-    return owner, opposite
