@@ -16,7 +16,7 @@ import numpy as np
 
 from .acceptance import Tolerances
 from .errors import FuzzymeshError, KnowledgeError
-from .anchors import RegionDistance
+from .regions import RegionDistance
 from .expr import Expression, ExpressionError
 from .fcl import load_fcl
 from .fuzzy import Rule, RuleBase, Term, Variable

@@ -22,7 +22,8 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from .anchors import DomainDistance, RegionDistance, SampledDistance, curve_distance, patch_distance
+from .anchors import DomainDistance, SampledDistance, curve_distance, patch_distance
+from .regions import RegionDistance
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
 from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values

@@ -85,3 +85,15 @@ def test_the_graph_sees_imports_inside_functions():
 
 def test_engine_has_no_import_cycles():
     assert cycles(import_graph()) == []
+
+
+def test_lint_needs_no_geometry_library():
+    """Checking rule files (fuzzymesh lint, the knowledge loading) imports none of the geometry kernels."""
+    import subprocess
+    import sys
+
+    heavy = ("igl", "trimesh", "gmsh", "pymeshlab", "manifold3d", "meshio")
+    probe = f"import sys, engine.knowledge; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                         cwd=ENGINE.parent).stdout.strip()
+    assert out == "[]"
