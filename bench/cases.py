@@ -10,8 +10,7 @@ the element count falls as about s^-3: one family of fields from 10k to 1M tetra
 from __future__ import annotations
 
 from engine.job import job_from_dict
-from engine.knowledge import load_knowledge
-from engine.pipeline import build_geometry, build_sizing
+from engine.pipeline import prepare
 from engine.schema import validate
 from engine.shapes import SHAPES
 
@@ -38,10 +37,7 @@ def junction_job(case: str, scale: float = 1.0) -> dict:
 
 def build_case(job: dict):
     """(knowledge base, geometry, features, sizing field) of a job dict."""
-    kb = load_knowledge()
-    job = job_from_dict(job)
-    geometry, features = build_geometry(job)
-    return kb, geometry, features, build_sizing(job, geometry, features, kb)
+    return tuple(prepare(job_from_dict(job)))
 
 
 def junction_edge(size: float = REFERENCE_SIZE):

@@ -213,15 +213,10 @@ def _cmd_explain(args) -> int:
                        fix="run 'fuzzymesh mesh' first and give its output folder")
     from .explain import explain_point
     from .job import load_job
-    from .knowledge import load_knowledge
-    from .pipeline import build_geometry, build_sizing, check_job_knowledge
+    from .pipeline import prepare
 
     logging.getLogger().setLevel(logging.WARNING)
-    job = load_job(args.job)
-    kb = load_knowledge(job.knowledge)
-    check_job_knowledge(job, kb)
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, kb)
+    _, geometry, _, sizing = prepare(load_job(args.job), max_elements=float("inf"))
     inside = bool(geometry.contains([args.at])[0])
     print(explain_point(sizing, args.at, inside))
     return 0

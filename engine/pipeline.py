@@ -7,6 +7,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -161,15 +162,20 @@ def check_output_dir(job: Job) -> None:
                        fix="name a folder you can write (output.directory or --out)")
 
 
-def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True,
-        keep_invalid: bool = False) -> Result:
-    """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
-    outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
-    or, with ``keep_invalid``, writes the files as ``<name>.invalid.*`` first."""
-    timings: dict = {}
-    if write:
-        check_output_dir(job)
-    packer, mesher = get_packer(job.packer), get_mesher(job.mesher)   # the plug-ins' contracts, before any work
+class Prepared(NamedTuple):
+    """Everything a job needs before packing."""
+
+    knowledge: KnowledgeBase
+    geometry: Geometry
+    features: Features
+    sizing: SizingField
+
+
+def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict | None = None) -> Prepared:
+    """The job's knowledge (loaded and checked against the job), geometry, features and sizing field, logged
+    with their times in ``timings``; refuses a sizing needing more than ``max_elements`` tetrahedra. The
+    one way to get there: the pipeline, ``fuzzymesh explain``, tests and benchmarks."""
+    timings = {} if timings is None else timings
     kb = load_knowledge(job.knowledge)
     check_job_knowledge(job, kb)
     with stage("geometry", timings):
@@ -186,6 +192,19 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     log.info("sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected "
              "(%.2f s)", len(sizing.placed), ", ".join(p.id for p in sizing.placed), sizing.global_size,
              sizing.h_min, sizing.h_max, expected, timings["sizing"])
+    return Prepared(kb, geometry, features, sizing)
+
+
+def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True,
+        keep_invalid: bool = False) -> Result:
+    """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
+    outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
+    or, with ``keep_invalid``, writes the files as ``<name>.invalid.*`` first."""
+    timings: dict = {}
+    if write:
+        check_output_dir(job)
+    packer, mesher = get_packer(job.packer), get_mesher(job.mesher)   # the plug-ins' contracts, before any work
+    kb, geometry, features, sizing = prepare(job, max_elements, timings)
     with stage("packing", timings):
         packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
     log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])

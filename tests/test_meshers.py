@@ -16,7 +16,7 @@ from engine.mesh import TetMesh
 from engine.meshing import get_mesher, mesher_names
 from engine.meshing.qhull import boundary_defects
 from engine.packing import CORNER, CURVE, EVENT, LEVELS, PATCH, VOLUME, get_packer, packer_names
-from engine.pipeline import build_geometry, build_sizing
+from engine.pipeline import prepare
 from engine.quality import surface_deviation, tet_quality
 
 CASES = {   # the solids: junction at the centre and near the edge, each at a default and a fine size
@@ -33,12 +33,9 @@ FINE = 0.75   # the fine size, x the default global size
 @functools.lru_cache(maxsize=None)
 def packed(case: str, fine: bool = False):
     spec = dict(CASES[case])
-    job = job_from_dict(spec)
-    geometry, features = build_geometry(job)
+    kb, geometry, features, sizing = prepare(job_from_dict(spec))
     if fine:
-        job = job_from_dict({**spec, "size": FINE * geometry.scale / 40.0})
-    kb = load_knowledge()
-    sizing = build_sizing(job, geometry, features, kb)
+        kb, geometry, features, sizing = prepare(job_from_dict({**spec, "size": FINE * geometry.scale / 40.0}))
     packing = get_packer("bubble")(geometry, features, sizing, seed=0, knowledge=kb)
     return geometry, features, sizing, packing
 

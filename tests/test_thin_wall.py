@@ -15,7 +15,7 @@ from engine.errors import LimitError
 from engine.explain import explain_point
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
-from engine.pipeline import build_geometry, build_sizing, job_placements
+from engine.pipeline import job_placements, prepare
 from engine.quality import tet_quality
 from engine.sizing import check_element_limit
 from engine.thickness import measure
@@ -125,8 +125,7 @@ def test_thin_wall_sizes_a_thin_plate_and_never_coarsens_a_finer_pattern():
                                    {"pattern": "uniform-region", "region": {"sphere": {"centre": [50, 0, 5],
                                                                                        "radius": 5}},
                                     "parameters": {"size": 1.0}}]})
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, KB)
+    _, geometry, features, sizing = prepare(job)
     names = [p.pattern for p in sizing.placed]
     assert names.count("thin-wall") == 1 and names.count("narrow-gap") == 1
     thin = names.index("thin-wall")
@@ -146,8 +145,7 @@ def test_thin_wall_sizes_a_thin_plate_and_never_coarsens_a_finer_pattern():
 
 def test_explain_names_the_thin_wall_and_its_tie():
     job = job_from_dict({"geometry": {"shape": "plate", "parameters": {"thickness": 4}}, "size": 10.0})
-    geometry, features = build_geometry(job)
-    text = explain_point(build_sizing(job, geometry, features, KB), [0, 0, 2], inside=True)
+    text = explain_point(prepare(job).sizing, [0, 0, 2], inside=True)
     assert "thin-wall@wall-3.36: pattern 'thin-wall', mu = 0.2500, h = 2 (dominance tie" in text
     assert "winner: thin-wall@wall-3.36 (highest mu 0.2500 over runner-up base with 0.2500, a tie" in text
     assert "L = 4" in text and "element size h = 2" in text
@@ -155,15 +153,13 @@ def test_explain_names_the_thin_wall_and_its_tie():
 
 def test_a_thick_part_gets_no_thin_wall():
     job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge"})
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, KB)
+    _, geometry, features, sizing = prepare(job, max_elements=float("inf"))
     assert [p.pattern for p in sizing.placed if p.pattern in ("thin-wall", "narrow-gap")] == []
 
 
 def test_the_element_guard_counts_the_thin_wall_refinement():
     job = job_from_dict({"geometry": {"shape": "plate", "parameters": {"thickness": 1}}, "size": 10.0})
-    geometry, features = build_geometry(job)
-    sizing = build_sizing(job, geometry, features, KB)
+    _, geometry, features, sizing = prepare(job, max_elements=float("inf"))
     assert sizing.h_min == pytest.approx(0.5, rel=1e-3)
     with pytest.raises(LimitError):
         check_element_limit(sizing, 1e5)
