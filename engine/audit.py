@@ -19,6 +19,7 @@ import numpy as np
 from .levels import NODE_LEVELS
 from .mesh import TetMesh
 from .quality import EDGES
+from .sizing import GRADED_THRESHOLD
 
 FORMAT = "fuzzymesh-audit/1"
 
@@ -62,7 +63,8 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
                            "size_ratio": "h_actual / h_target", "winner": "index into patterns",
                            "winner_mu": "membership of the winner", "runner_up": "index into patterns, -1: none",
                            "runner_up_mu": "membership of the runner-up", "graded": "1 if the gradation limit "
-                           "lowered the size", "gradation": "how much it lowered it", "zone": "index into zones",
+                           f"lowered the size by more than {100 * GRADED_THRESHOLD:g} %", "gradation": "how much it "
+                           "lowered it (raw size - h)", "zone": "index into zones",
                            "placement": "index into placements"},
         "node_fields": {"node_level": "index into levels", "node_entity": "index into corners / curves / patches "
                         "by level", "bubble": "bubble id, -1 for nodes the mesher added",
@@ -178,7 +180,10 @@ def explain_element(cells: dict, legend: dict, element: int) -> str:
         lines.append(f"the gradation limit g = {legend['gradation_limit']:g} lowered the size by "
                      f"{get['gradation']:.6g} (a smaller size nearby)")
     else:
-        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} is not active here")
+        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} is not active here (it lowers the size "
+                     f"by {get['gradation']:.3g}, not more than {100 * GRADED_THRESHOLD:g} %)"
+                     if get["gradation"] > 0 else
+                     f"the gradation limit g = {legend['gradation_limit']:g} is not active here")
     return "\n".join(lines)
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sizing import SizingField
+from .sizing import GRADED_THRESHOLD, SizingField
 
 
 def explain_point(sizing: SizingField, point, inside: bool | None = None) -> str:
@@ -39,6 +39,7 @@ def explain_point(sizing: SizingField, point, inside: bool | None = None) -> str
         lines.append(f"gradation limit g = {sizing.gradation:g} (h(y) <= h(x) + {sizing.gradation - 1:g} |x - y|) "
                      f"lowers it by {raw - h:.6g} to {h:.6g}")
     else:
-        lines.append(f"gradation limit g = {sizing.gradation:g}: not active here")
+        lines.append(f"gradation limit g = {sizing.gradation:g}: not active here"
+                     + (f" (it lowers it by {raw - h:.3g}, not more than {100 * GRADED_THRESHOLD:g} %)" if h < raw else ""))
     lines.append(f"element size h = {h:.6g}")
     return "\n".join(lines)

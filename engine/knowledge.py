@@ -82,6 +82,9 @@ RULEBASE = {
     "action": Field(MAPPING, open_keys=True, doc="{output: NAME, threshold: NUMBER}: act where output >= threshold"),
 }
 PACKER_SETTINGS = {
+    "diameter": Field(NUMBER, default=0.87, check=in_range(0.5, 1.5),
+                      doc="bubble diameter / h: calibrated so that the median edge of the mesh is h (docs/rules.md "
+                          "section 4, bench/size_calibration.py); the shipped knowledge/population.yaml gives it"),
     "control_interval": Field(INTEGER, default=10, check=in_range(1, 10_000),
                               doc="dynamics steps between two population-control rounds"),
     "control_rounds": Field(INTEGER, default=8, check=in_range(0, 10_000),

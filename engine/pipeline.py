@@ -30,7 +30,7 @@ from .report import report_summary, report_targets
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
 from .shapes import build_shape
-from .sizing import SizingField, bind, check_element_limit
+from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
 
@@ -256,8 +256,8 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     shares = np.bincount(audit.cells["winner"] + 1, minlength=len(sizing.placed) + 1) / max(len(mesh.tets), 1)
     winners = ", ".join(f"{name} {100 * share:.1f} %" for name, share in
                         zip(["none"] + [p.id for p in sizing.placed], shares) if share > 0)
-    log.info("audit: %d elements sized by %s; %.1f %% lowered by the gradation limit (%.2f s)", len(mesh.tets),
-             winners, 100 * np.mean(audit.cells["graded"]), timings["audit"])
+    log.info("audit: %d elements sized by %s; %.1f %% lowered by more than %g %% by the gradation limit (%.2f s)",
+             len(mesh.tets), winners, 100 * np.mean(audit.cells["graded"]), 100 * GRADED_THRESHOLD, timings["audit"])
     warnings = idle_patterns(audit.legend)
     for warning in warnings:
         log.warning(warning)

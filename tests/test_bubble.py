@@ -27,9 +27,13 @@ def pack(job, packer="bubble", **options):
     return get_packer(packer)(geometry, features, sizing, seed=0, knowledge=KB, **options)
 
 
-def spacing_share(packing, sizing):
-    """Share of bubbles whose nearest neighbour is within [0.85, 1.15] of the stable distance."""
-    h = sizing(packing.points)
+DIAMETER = KB.packer_settings["population"]["diameter"]   # bubble diameter / h
+
+
+def spacing_share(packing, sizing, diameter=1.0):
+    """Share of nodes whose nearest neighbour is within [0.85, 1.15] of the stable distance of bubbles of
+    diameter ``diameter`` x h (the bubble packer's setting; the lattice packer spaces by h)."""
+    h = diameter * sizing(packing.points)
     distance, index = cKDTree(packing.points).query(packing.points, k=2)
     ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
     return float(np.mean((ratio >= 0.85) & (ratio <= 1.15)))
@@ -45,7 +49,7 @@ def test_bubbles_settle_at_the_stable_distance(job):
     _, _, sizing = setup(job)
     bubble = pack(job)
     lattice = pack(job, "lattice")
-    share, baseline = spacing_share(bubble, sizing), spacing_share(lattice, sizing)
+    share, baseline = spacing_share(bubble, sizing, DIAMETER), spacing_share(lattice, sizing)
     initial = bubble.stats["initial_nearest_over_r0"]["within_0.85_1.15"]
     print(f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice {baseline:.3f}, "
           f"bubble's initial placement {initial:.3f}")

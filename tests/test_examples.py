@@ -196,8 +196,8 @@ def test_no_size_jump_across_pattern_boundaries(example_output, name):
 
 
 def test_the_jump_check_fails_on_a_field_that_jumps(example_output, tmp_path):
-    """Fig. 9 with a test-only gradation g = 3.0 (h may grow by 2 per unit length: 4.5 to 10 within
-    3 mm, less than one element) against the shipped limit g = 1.3: both checks fail."""
+    """Fig. 9 with a test-only gradation g = 3.0 (h may grow by 2 per unit length: 5.2 to 11.5 within
+    3.2 mm, less than one element) against the shipped limit g = 1.3: both checks fail."""
     (tmp_path / "steep.yaml").write_text("kind: sizing\ndoc: test only, sizes jump\ngradation: 3.0\n"
                                          "base_pattern: uniform-domain\n")
     job = yaml.safe_load((EXAMPLES / "connected-uniform-nonuniform.yaml").read_text())

@@ -1,7 +1,7 @@
 """The ``bubble`` packer: the paper's dynamic bubbles with fuzzy population control.
 
 Level by level (corners fixed; then curves, patches, the volume, each with the
-lower levels frozen), bubbles of diameter d = h(x) start near their final
+lower levels frozen), bubbles of diameter d = c h(x) start near their final
 count (curves at equal steps of the integral of 1/h, patches and volume from
 density-following samples, as the lattice packer) and move under Shimada's
 interbubble force: m s'' + c s' = f, integrated with the classical 4th-order
@@ -15,6 +15,12 @@ short on purpose: the rounds leave the bubbles near equilibrium, and without
 population control a longer run lets the attractive tail of the force pull
 bubbles together (the share at 0.85-1.15 r0 went from 99.6 % after 8 settling
 steps to 97.7 % after 42 on the junction).
+
+c is the ``diameter`` packer setting of the population rule file (knowledge/population.yaml): h is the
+target mean edge length of the elements (docs/rules.md section 4), and the Delaunay edges between bubbles
+at the stable distance are longer than that distance (the nearest neighbour is the shortest edge), so
+bubbles are packed at c < 1 times h (bench/size_calibration.py). The nodes' ``radius`` stays h / 2, the
+target size; the packer's own statistics (``nearest_over_r0``) measure against the bubble diameter.
 """
 from __future__ import annotations
 
@@ -102,6 +108,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
 
     rng = np.random.default_rng(seed)
     control = PopulationControl(knowledge or load_knowledge())
+    bubbles = _Scaled(sizing, control.settings["diameter"])   # bubble diameters d = c h
     events: list[np.ndarray] = []     # EVENT rows, a block per control round
     timings, counters = {}, {"next_id": 0}
     corners = _corner_nodes(features, sizing)
@@ -112,12 +119,12 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
     for level in (CURVE, PATCH, VOLUME):
         start = time.perf_counter()
         frozen = Packing.concatenate(parts)
-        start_nodes = _initial(level, geometry, features, sizing, frozen, rng, initial_density)
+        start_nodes = _initial(level, geometry, features, bubbles, frozen, rng, initial_density)
         initial_counts[LEVELS[level]] = len(start_nodes)
         starts.append(start_nodes.points)
         state = LevelState(level, start_nodes.points, start_nodes.entity,
                            _new_ids(len(start_nodes), counters), frozen.points)
-        steps = _relax(state, constraints[level], geometry, sizing, control, rng, events, counters)
+        steps = _relax(state, constraints[level], geometry, bubbles, control, rng, events, counters)
         points = state.x
         parts.append(Packing(points, np.full(len(points), level), state.entity, sizing(points) / 2,
                              ids=state.ids))
@@ -126,7 +133,8 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
                  initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
     packing = Packing.concatenate(parts)
     packing.events = np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray)
-    packing.stats = _statistics(packing, sizing, initial_counts, np.concatenate(starts), timings, packing.events)
+    packing.stats = _statistics(packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings,
+                                packing.events)
     return packing
 
 
@@ -141,18 +149,20 @@ def _new_ids(count: int, counters) -> np.ndarray:
     return ids
 
 
-def _initial(level, geometry, features, sizing, frozen, rng, density):
-    """Starting bubbles of a level, about ``density`` times the count the sizing field asks for."""
-    scaled = _Scaled(sizing, density ** (-1.0 / {CURVE: 1, PATCH: 2, VOLUME: 3}[level]))
+def _initial(level, geometry, features, bubbles, frozen, rng, density):
+    """Starting bubbles of a level, about ``density`` times the count the sizing field asks for (``bubbles``:
+    the bubble diameters, c h). The volume starts at the estimate's NODES_PER_H3 / h^3, that is
+    NODES_PER_H3 c^3 per bubble diameter cubed."""
+    scaled = _Scaled(bubbles, density ** (-1.0 / {CURVE: 1, PATCH: 2, VOLUME: 3}[level]))
     if level == CURVE:
         return _curve_nodes(features, scaled, existing=frozen.points)
     if level == PATCH:
         return _patch_nodes(geometry, features, scaled, frozen, rng)
-    return _volume_nodes(geometry, sizing, frozen, rng, density=NODES_PER_H3 * density)
+    return _volume_nodes(geometry, bubbles, frozen, rng, density=NODES_PER_H3 * bubbles.factor ** 3 * density)
 
 
 class _Scaled:
-    """A sizing field times a constant (to start with more or fewer bubbles)."""
+    """A sizing field times a constant: the bubble diameters c h, or a start with more or fewer bubbles."""
 
     def __init__(self, sizing, factor: float):
         self.sizing, self.factor = sizing, factor
@@ -310,16 +320,18 @@ def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sou
     return spots, sources
 
 
-def _statistics(packing, sizing, initial_counts, initial_points, timings, events) -> dict:
-    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 of the packing and of
-    its starting places (each level's start beside the settled lower levels), events, timings."""
+def _statistics(packing, sizing, bubbles, initial_counts, initial_points, timings, events) -> dict:
+    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 (r0 from the bubble
+    diameters ``bubbles``) of the packing and of its starting places (each level's start beside the settled
+    lower levels), events, timings."""
     expected_nodes, _ = sizing.expected_counts
     return {
         "nodes": len(packing), "expected_nodes": expected_nodes,
         **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
         "initial": initial_counts,
-        "nearest_over_r0": nearest_over_r0(packing.points, 2 * packing.radius),
-        "initial_nearest_over_r0": nearest_over_r0(initial_points, sizing(initial_points)),
+        "diameter": bubbles.factor,
+        "nearest_over_r0": nearest_over_r0(packing.points, bubbles(packing.points)),
+        "initial_nearest_over_r0": nearest_over_r0(initial_points, bubbles(initial_points)),
         "deleted": int(np.count_nonzero(events.action == "delete")),
         "inserted": int(np.count_nonzero(events.action == "insert")),
         "seconds": timings,
