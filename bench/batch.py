@@ -8,6 +8,7 @@ are inside its time, this process's imports are not inside the sequential time (
 
 Prints a Markdown table (bench/batch.md holds one run's figures).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,8 +27,11 @@ def study_file(folder: Path, seeds: int) -> Path:
     """The junction family (radius 15-25 x offset 60, 75) crossed with ``seeds`` seeds, in ``folder``."""
     shutil.copy(BASE, folder / "base.yaml")
     text = (BASE.parent / "junction-family.yaml").read_text().replace("junction-family-base.yaml", "base.yaml")
-    (folder / "base.yaml").write_text((folder / "base.yaml").read_text().replace(
-        "../knowledge/paper-sizing.yaml", str(ROOT / "examples" / "knowledge" / "paper-sizing.yaml")))
+    (folder / "base.yaml").write_text(
+        (folder / "base.yaml")
+        .read_text()
+        .replace("../knowledge/paper-sizing.yaml", str(ROOT / "examples" / "knowledge" / "paper-sizing.yaml"))
+    )
     text = text.replace("  offset: [60, 75]", f"  offset: [60, 75]\n  seed: {{from: 0, to: {seeds - 1}, step: 1}}")
     path = folder / "study.yaml"
     path.write_text(text)
@@ -43,7 +47,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         path = study_file(Path(scratch), args.seeds)
         study = load_study(path)
-        mesh_variant(study.variants[0])                 # imports and numba's kernels, once
+        mesh_variant(study.variants[0])  # imports and numba's kernels, once
         shutil.rmtree(study.directory)
         start = time.perf_counter()
         results = [mesh_variant(v) for v in study.variants]
@@ -52,8 +56,9 @@ def main() -> None:
             shutil.rmtree(study.directory)
             start = time.perf_counter()
             results, _ = batch(path, workers=workers)
-            rows.append((f"LocalCluster, {workers} worker process{'es' * (workers > 1)}", time.perf_counter() - start,
-                         results))
+            rows.append(
+                (f"LocalCluster, {workers} worker process{'es' * (workers > 1)}", time.perf_counter() - start, results)
+            )
     meshed = sum(r["status"] == "ok" for r in rows[0][2])
     print(f"{len(study.variants)} variants, {meshed} meshed (the others refused: no mesh)\n")
     print("| run | wall time (s) | meshes per minute | speed-up |\n|---|---|---|---|")

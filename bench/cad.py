@@ -15,6 +15,7 @@ the CAD's (``occ.getMass``). One run per case. Writes ``bench/cad.json`` and ``b
 
     python bench/cad.py [--work DIR] [--timeout 300]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-PER_TURN = 24          # elements per full turn: fuzzymesh's always-placed curvature rule, given to Gmsh too
-STL_TESSELLATION = (5.0, 5e-4)   # degrees, sagitta x the diagonal
+PER_TURN = 24  # elements per full turn: fuzzymesh's always-placed curvature rule, given to Gmsh too
+STL_TESSELLATION = (5.0, 5e-4)  # degrees, sagitta x the diagonal
 
 
 def _module(name: str, path: Path):
@@ -47,8 +48,9 @@ def _module(name: str, path: Path):
 parts = _module("bench_parts", HERE / "parts.py")
 test_cad = _module("test_cad", HERE.parent / "tests" / "test_cad.py")
 BUILDERS = {name: test_cad.PARTS[name] for name in ("box_with_holes", "bracket", "junction")}
-BUILDERS.update({name: test_cad.make_parts.PARTS[name] for name in ("countersunk_plate", "filleted_hole_floor",
-                                                                    "pillow_block")})
+BUILDERS.update(
+    {name: test_cad.make_parts.PARTS[name] for name in ("countersunk_plate", "filleted_hole_floor", "pillow_block")}
+)
 
 
 def write_part(name: str, folder: Path) -> dict:
@@ -76,8 +78,9 @@ def run_gmsh(step: Path, folder: Path, size: float, timeout: float) -> dict:
     """Gmsh (``--gmsh`` worker below) on ``step``; status, wall and meshing seconds, and the mesh if any."""
     folder.mkdir(parents=True, exist_ok=True)
     out = folder / "gmsh.npz"
-    code, stderr, seconds = parts._run([sys.executable, str(Path(__file__).resolve()), "--gmsh", str(step), str(size),
-                                        str(out)], timeout, folder)
+    code, stderr, seconds = parts._run(
+        [sys.executable, str(Path(__file__).resolve()), "--gmsh", str(step), str(size), str(out)], timeout, folder
+    )
     result = {"exit_code": code, "seconds": seconds}
     if code != 0:
         result["error"] = f"timeout after {timeout:g} s" if code is None else parts._error_line(stderr, code)
@@ -107,16 +110,16 @@ def gmsh_worker(step: str, size: float, out: str) -> None:
     _, nodes = gmsh.model.mesh.getElementsByType(4)
     index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
-    np.savez(out, points=coordinates.reshape(-1, 3), tets=index[nodes.astype(np.int64)].reshape(-1, 4),
-             seconds=seconds)
+    np.savez(out, points=coordinates.reshape(-1, 3), tets=index[nodes.astype(np.int64)].reshape(-1, 4), seconds=seconds)
     gmsh.finalize()
 
 
 def bench(work: Path, timeout: float) -> dict:
     import gmsh
 
-    commit = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True,
-                            cwd=HERE).stdout.strip()
+    commit = subprocess.run(
+        ["git", "describe", "--always", "--dirty"], capture_output=True, text=True, cwd=HERE
+    ).stdout.strip()
     load = os.getloadavg()[0]
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     gmsh.option.setNumber("General.Terminal", 0)
@@ -126,9 +129,11 @@ def bench(work: Path, timeout: float) -> dict:
         folder.mkdir(parents=True, exist_ok=True)
         part = write_part(name, folder)
         size = part["diagonal"] / parts.SIZE_FROM_SCALE
-        runs = {"fuzzymesh STEP": parts.run_fuzzymesh(part["step"], folder / "step", None, timeout),
-                "fuzzymesh STL": parts.run_fuzzymesh(part["stl"], folder / "stl", None, timeout),
-                "Gmsh STEP": run_gmsh(part["step"], folder / "gmsh", size, timeout)}
+        runs = {
+            "fuzzymesh STEP": parts.run_fuzzymesh(part["step"], folder / "step", None, timeout),
+            "fuzzymesh STL": parts.run_fuzzymesh(part["stl"], folder / "stl", None, timeout),
+            "Gmsh STEP": run_gmsh(part["step"], folder / "gmsh", size, timeout),
+        }
         for run, result in runs.items():
             mesh = result.pop("mesh", None)
             if mesh is not None and len(mesh[1]):
@@ -136,32 +141,57 @@ def bench(work: Path, timeout: float) -> dict:
                 figures["volume_error_cad"] = figures["volume"] / part["cad_volume"] - 1
                 result.update(figures)
         rows.append({"name": name, "size": size, "cad_volume": part["cad_volume"], **runs})
-        print(name, *(f"{run}: {r.get('error', 'ok')} {r['seconds']:.1f}s" for run, r in runs.items()), sep=" | ",
-              flush=True)
+        print(
+            name,
+            *(f"{run}: {r.get('error', 'ok')} {r['seconds']:.1f}s" for run, r in runs.items()),
+            sep=" | ",
+            flush=True,
+        )
     gmsh.finalize()
-    return {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "commit": commit,
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "load_start": load,
-            "load_end": os.getloadavg()[0], "timeout": timeout, "rows": rows}
+    return {
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "commit": commit,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "load_start": load,
+        "load_end": os.getloadavg()[0],
+        "timeout": timeout,
+        "rows": rows,
+    }
 
 
 def markdown(results: dict) -> str:
-    lines = ["# CAD input: fuzzymesh and Gmsh on STEP parts", "",
-             f"Run {results['date']} (code at {results['commit']}) on {results['machine']}, one run per case, load "
-             f"average {results['load_start']:.1f} at the start and {results['load_end']:.1f} at the end. Made by "
-             "`python bench/cad.py`. Size H = diagonal / 40 for all; fuzzymesh's default job (its curvature rule: 24 "
-             "elements per circle), Gmsh with `Mesh.MeshSizeMax` = H and `Mesh.MeshSizeFromCurvature` = 24. Wall: the "
-             "whole subprocess; mesh: fuzzymesh's geometry + sizing + packing + meshing stages, Gmsh's import to "
-             "3-D mesh. Volume against the CAD's (`occ.getMass`) of the linear mesh.", "",
-             "| part | H | run | status | wall s | mesh s | tets | min dih. | dV CAD % |",
-             "|---|---:|---|---|---:|---:|---:|---:|---:|"]
+    lines = [
+        "# CAD input: fuzzymesh and Gmsh on STEP parts",
+        "",
+        f"Run {results['date']} (code at {results['commit']}) on {results['machine']}, one run per case, load "
+        f"average {results['load_start']:.1f} at the start and {results['load_end']:.1f} at the end. Made by "
+        "`python bench/cad.py`. Size H = diagonal / 40 for all; fuzzymesh's default job (its curvature rule: 24 "
+        "elements per circle), Gmsh with `Mesh.MeshSizeMax` = H and `Mesh.MeshSizeFromCurvature` = 24. Wall: the "
+        "whole subprocess; mesh: fuzzymesh's geometry + sizing + packing + meshing stages, Gmsh's import to "
+        "3-D mesh. Volume against the CAD's (`occ.getMass`) of the linear mesh.",
+        "",
+        "| part | H | run | status | wall s | mesh s | tets | min dih. | dV CAD % |",
+        "|---|---:|---|---|---:|---:|---:|---:|---:|",
+    ]
     for row in results["rows"]:
         for run in ("fuzzymesh STEP", "fuzzymesh STL", "Gmsh STEP"):
             r = row[run]
             status = r.get("error", "ok")
-            figures = ([f"{r['mesh_seconds']:.1f}", str(r["tets"]), f"{r['min_dihedral']:.1f}",
-                        f"{100 * r['volume_error_cad']:+.3f}"] if "tets" in r else ["", "", "", ""])
-            lines.append(f"| {row['name']} | {row['size']:.3g} | {run} | {status} | {r['seconds']:.1f} | "
-                         + " | ".join(figures) + " |")
+            figures = (
+                [
+                    f"{r['mesh_seconds']:.1f}",
+                    str(r["tets"]),
+                    f"{r['min_dihedral']:.1f}",
+                    f"{100 * r['volume_error_cad']:+.3f}",
+                ]
+                if "tets" in r
+                else ["", "", "", ""]
+            )
+            lines.append(
+                f"| {row['name']} | {row['size']:.3g} | {run} | {status} | {r['seconds']:.1f} | "
+                + " | ".join(figures)
+                + " |"
+            )
     return "\n".join(lines) + "\n"
 
 

@@ -7,6 +7,7 @@ The Gmsh reference case of ../shared/reference/NOTES.md is the junction-edge rec
 that field by ``scale`` (H = 1.8 s and the pattern's ``near`` = 0.06 s), so the field keeps its shape and
 the element count falls as about s^-3: one family of fields from 10k to 1M tetrahedra.
 """
+
 from __future__ import annotations
 
 from engine.job import job_from_dict
@@ -14,10 +15,10 @@ from engine.pipeline import prepare
 from engine.schema import validate
 from engine.shapes import SHAPES
 
-REFERENCE_SIZE = 1.8     # global size H of the reference case
-JUNCTION_NEAR = 0.06     # plate-edge-junction's default 'near' (x the cylinder radius): h = 1.5 at H = 1.8
-OFFSETS = {"junction-centre": 0.0, "junction-edge": 60.0}   # cylinder axis x from the plate centre
-TIERS = {"10k": 4.67, "100k": 2.17, "1M": 1.0}               # scale -> about this many tetrahedra (fuzzymesh)
+REFERENCE_SIZE = 1.8  # global size H of the reference case
+JUNCTION_NEAR = 0.06  # plate-edge-junction's default 'near' (x the cylinder radius): h = 1.5 at H = 1.8
+OFFSETS = {"junction-centre": 0.0, "junction-edge": 60.0}  # cylinder axis x from the plate centre
+TIERS = {"10k": 4.67, "100k": 2.17, "1M": 1.0}  # scale -> about this many tetrahedra (fuzzymesh)
 
 
 def junction_parameters(case: str) -> dict:
@@ -28,11 +29,19 @@ def junction_parameters(case: str) -> dict:
 
 def junction_job(case: str, scale: float = 1.0) -> dict:
     """The job (as a dict) of ``case`` with the junction-edge recipe's patterns, every size x ``scale``."""
-    return {"geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": OFFSETS[case]}},
-            "size": REFERENCE_SIZE * scale,
-            "place": [{"pattern": "uniform-domain"},
-                      {"pattern": "plate-edge-junction", "every": "junction", "roles": {"edge": "plate-edge"},
-                       "parameters": {"near": JUNCTION_NEAR * scale}}]}
+    return {
+        "geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": OFFSETS[case]}},
+        "size": REFERENCE_SIZE * scale,
+        "place": [
+            {"pattern": "uniform-domain"},
+            {
+                "pattern": "plate-edge-junction",
+                "every": "junction",
+                "roles": {"edge": "plate-edge"},
+                "parameters": {"near": JUNCTION_NEAR * scale},
+            },
+        ],
+    }
 
 
 def build_case(job: dict):

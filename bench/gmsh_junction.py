@@ -4,14 +4,15 @@ graded background grid, read by Gmsh's ``Structured`` field, which interpolates 
 
 This module imports gmsh and numpy only, so a Gmsh worker process measures Gmsh's memory, not ours.
 """
+
 from __future__ import annotations
 
 import time
 
 import numpy as np
 
-ALGORITHMS = {"gmsh-delaunay": 1, "gmsh-hxt": 10}            # Mesh.Algorithm3D
-THREADS = {"gmsh-delaunay": 1, "gmsh-hxt": 2}               # Mesh.MaxNumThreads3D (Delaunay is serial)
+ALGORITHMS = {"gmsh-delaunay": 1, "gmsh-hxt": 10}  # Mesh.Algorithm3D
+THREADS = {"gmsh-delaunay": 1, "gmsh-hxt": 2}  # Mesh.MaxNumThreads3D (Delaunay is serial)
 SIZE_SOURCES_OFF = ("MeshSizeFromPoints", "MeshSizeFromCurvature", "MeshSizeExtendFromBoundary")
 
 
@@ -101,8 +102,11 @@ def generate(mesher: str, after_stage=None) -> dict:
     separate_optimiser = mesher == "gmsh-delaunay"
     if separate_optimiser:
         gmsh.option.setNumber("Mesh.Optimize", 0)
-    stages = [("curves", lambda: gmsh.model.mesh.generate(1)), ("surface", lambda: gmsh.model.mesh.generate(2)),
-              ("volume", lambda: gmsh.model.mesh.generate(3))]
+    stages = [
+        ("curves", lambda: gmsh.model.mesh.generate(1)),
+        ("surface", lambda: gmsh.model.mesh.generate(2)),
+        ("volume", lambda: gmsh.model.mesh.generate(3)),
+    ]
     if separate_optimiser:
         stages.append(("optimise", lambda: gmsh.model.mesh.optimize("")))
     seconds = {}

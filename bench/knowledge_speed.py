@@ -5,6 +5,7 @@
 Targets on the 2-core reference machine: 1,000,000 inputs through a 3-rule base <= 0.5 s;
 1,000,000 points x 10 placed patterns <= 1 s.
 """
+
 from __future__ import annotations
 
 import statistics
@@ -20,7 +21,7 @@ REPEATS = 7
 
 
 def median_time(function, *args) -> float:
-    function(*args)   # warm up (JIT, caches)
+    function(*args)  # warm up (JIT, caches)
     times = []
     for _ in range(REPEATS):
         start = time.perf_counter()
@@ -37,10 +38,17 @@ def main() -> None:
     t = median_time(delete.evaluate, {"overlap": overlap})
     print(f"fuzzy: 1,000,000 inputs x {len(delete.rules)} rules (Mamdani, centroid): {t:.3f} s (median of {REPEATS})")
 
-    spheres = [{"pattern": "uniform-region", "region": {"sphere": {"centre": [float(x), 0.0, 10.0], "radius": 5.0}},
-                "parameters": {"size": 2.0, "transition": 10.0}} for x in np.linspace(-80, 80, 8)]
-    job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0, "recipe": "junction-edge",
-                         "place": spheres})
+    spheres = [
+        {
+            "pattern": "uniform-region",
+            "region": {"sphere": {"centre": [float(x), 0.0, 10.0], "radius": 5.0}},
+            "parameters": {"size": 2.0, "transition": 10.0},
+        }
+        for x in np.linspace(-80, 80, 8)
+    ]
+    job = job_from_dict(
+        {"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0, "recipe": "junction-edge", "place": spheres}
+    )
     geometry, features = build_geometry(job)
     start = time.perf_counter()
     sizing = build_sizing(job, geometry, features, kb)

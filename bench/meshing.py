@@ -9,6 +9,7 @@ constrained Delaunay + IN/OUT, quality improvement), the element quality before 
 improvement, the volume error and the boundary's distance from the input surface. ``--qhull``
 adds the paper's method (unconstrained Qhull + centroid test) for comparison.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -18,6 +19,7 @@ import statistics
 import time
 
 from cases import junction_edge
+
 from engine.meshing import get_mesher
 from engine.packing import get_packer
 from engine.quality import surface_deviation, tet_quality
@@ -26,14 +28,20 @@ from engine.quality import surface_deviation, tet_quality
 def report(name, mesh, geometry, sizing, seconds):
     quality = tet_quality(mesh.points, mesh.tets).summary()
     print(f"{name}: {len(mesh.tets):,} tets, {len(mesh.points):,} nodes; median {seconds:.2f} s")
-    print(f"  min dihedral {quality['min_dihedral']['min']:.2f} deg (1st percentile {quality['min_dihedral']['p01']:.2f}),"
-          f" {quality['below']['min_dihedral_10']} below 10 deg; radius ratio min {quality['radius_ratio']['min']:.3f}"
-          f" (1st percentile {quality['radius_ratio']['p01']:.3f})")
+    print(
+        f"  min dihedral {quality['min_dihedral']['min']:.2f} deg"
+        f" (1st percentile {quality['min_dihedral']['p01']:.2f}),"
+        f" {quality['below']['min_dihedral_10']} below 10 deg; radius ratio min {quality['radius_ratio']['min']:.3f}"
+        f" (1st percentile {quality['radius_ratio']['p01']:.3f})"
+    )
     print(f"  volume {100 * (mesh.volume / geometry.volume - 1):+.3f} % of the solid", end="")
     if len(mesh.boundary):
         deviation = surface_deviation(mesh, geometry, sizing)
-        print(f"; input surface to mesh boundary max {deviation['input_to_mesh']:.4f} "
-              f"({deviation['input_to_mesh_over_h']:.3f} h)", end="")
+        print(
+            f"; input surface to mesh boundary max {deviation['input_to_mesh']:.4f} "
+            f"({deviation['input_to_mesh_over_h']:.3f} h)",
+            end="",
+        )
     print()
     print("  " + ", ".join(f"{k} {v}" for k, v in mesh.stats.items() if k != "seconds"))
 
@@ -55,8 +63,11 @@ def main() -> None:
         runs.append((time.perf_counter() - start, mesh.stats["seconds"]))
     stages = {k: statistics.median(r[1][k] for r in runs) for k in runs[0][1]}
     report("delaunay", mesh, geometry, sizing, statistics.median(t for t, _ in runs))
-    print("  per stage (median): " + ", ".join(f"{k} {v:.2f} s" for k, v in stages.items())
-          + f"; all runs: {', '.join(f'{t:.2f}' for t, _ in runs)} s")
+    print(
+        "  per stage (median): "
+        + ", ".join(f"{k} {v:.2f} s" for k, v in stages.items())
+        + f"; all runs: {', '.join(f'{t:.2f}' for t, _ in runs)} s"
+    )
     if args.qhull:
         start = time.perf_counter()
         mesh = get_mesher("qhull")(packing, geometry, features, seed=0)

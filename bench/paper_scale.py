@@ -13,6 +13,7 @@ compiles its kernels), then ``--repeats`` times in this process, and prints the 
 
 and the median time of every stage.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,15 +55,31 @@ def measure(job_path: Path, repeats: int) -> dict:
             stages.append(result.timings)
             return result
 
-        figures = {"job": job_path.name, "tets": len(warm.mesh.tets), "nodes": len(warm.mesh.points),
-                   "warm_up_seconds": sum(warm.timings.values()), "repeats": repeats}
+        figures = {
+            "job": job_path.name,
+            "tets": len(warm.mesh.tets),
+            "nodes": len(warm.mesh.points),
+            "warm_up_seconds": sum(warm.timings.values()),
+            "repeats": repeats,
+        }
         median, runs, result = timed(mesh_only, repeats)
-        figures["mesh"] = {"median": median, "runs": runs,
-                           "stages": {k: statistics.median(t[k] for t in stages) for k in stages[0]}}
+        figures["mesh"] = {
+            "median": median,
+            "runs": runs,
+            "stages": {k: statistics.median(t[k] for t in stages) for k in stages[0]},
+        }
         median, runs, _ = timed(lambda: run(job, write=True), repeats)
         figures["mesh_and_files"] = {"median": median, "runs": runs}
-        command = [sys.executable, "-m", "engine.cli", "mesh", str(job_path), "--out", str(Path(folder) / "cli"),
-                   "--quiet"]
+        command = [
+            sys.executable,
+            "-m",
+            "engine.cli",
+            "mesh",
+            str(job_path),
+            "--out",
+            str(Path(folder) / "cli"),
+            "--quiet",
+        ]
         median, runs, _ = timed(lambda: subprocess.run(command, check=True), repeats)
         figures["command"] = {"median": median, "runs": runs}
         figures["min_dihedral"] = result.quality["min_dihedral"]["min"]
@@ -81,8 +98,10 @@ def main() -> None:
     def runs(key):
         return f"median {figures[key]['median']:.2f} s  (runs {', '.join(f'{s:.2f}' for s in figures[key]['runs'])})"
 
-    print(f"{figures['job']}: {figures['tets']:,} tetrahedra, {figures['nodes']:,} nodes "
-          f"(warm-up {figures['warm_up_seconds']:.2f} s)")
+    print(
+        f"{figures['job']}: {figures['tets']:,} tetrahedra, {figures['nodes']:,} nodes "
+        f"(warm-up {figures['warm_up_seconds']:.2f} s)"
+    )
     print(f"  mesh:          {runs('mesh')}")
     print("    stages (median): " + ", ".join(f"{k} {v:.3f}" for k, v in figures["mesh"]["stages"].items()) + " s")
     print(f"  mesh + files:  {runs('mesh_and_files')}")

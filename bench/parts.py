@@ -15,6 +15,7 @@ and the STL (sampled). Writes ``bench/parts.json`` and ``bench/parts.md``.
 
     python bench/parts.py [--parts DIR] [--work DIR] [--names NAME ...] [--timeout 300]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,7 +34,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 MAKE_PARTS = HERE.parent / "tests" / "parts" / "make_parts.py"
-SIZE_FROM_SCALE = 40.0                  # fuzzymesh's default global size: bounding-box diagonal / 40
+SIZE_FROM_SCALE = 40.0  # fuzzymesh's default global size: bounding-box diagonal / 40
 RUNS = ("default", "static-stress")
 # tetrahedron faces (face k opposite vertex k) and, per edge, the two faces that meet there
 FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
@@ -43,6 +44,7 @@ ENV = {**os.environ, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSI
 
 # ----------------------------------------------------------------------------------------------- measures
 
+
 def tet_measures(points: np.ndarray, tets: np.ndarray) -> dict:
     """Count, minimum dihedral angle (degrees; 0 for a degenerate tet), volume (|sum of signed volumes|)
     and the number of tets whose sign differs from the total's."""
@@ -50,14 +52,18 @@ def tet_measures(points: np.ndarray, tets: np.ndarray) -> dict:
     signed = np.einsum("mi,mi->m", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
     a, b, c = (p[:, FACES[:, k]] for k in range(3))
     normals = np.cross(b - a, c - a)
-    away = np.sign(np.einsum("mfi,mfi->mf", normals, a - p))        # orient face k away from vertex k
+    away = np.sign(np.einsum("mfi,mfi->mf", normals, a - p))  # orient face k away from vertex k
     with np.errstate(invalid="ignore", divide="ignore"):
         normals *= (away / np.linalg.norm(normals, axis=2))[..., None]
         cosine = -np.einsum("mei,mei->me", normals[:, EDGE_FACES[:, 0]], normals[:, EDGE_FACES[:, 1]])
     dihedral = np.degrees(np.arccos(np.clip(np.nan_to_num(cosine, nan=1.0), -1, 1))).min(axis=1)
     total = signed.sum()
-    return {"tets": len(tets), "min_dihedral": float(dihedral.min()), "volume": float(abs(total)),
-            "inverted": int((np.sign(signed) != np.sign(total)).sum())}
+    return {
+        "tets": len(tets),
+        "min_dihedral": float(dihedral.min()),
+        "volume": float(abs(total)),
+        "inverted": int((np.sign(signed) != np.sign(total)).sum()),
+    }
 
 
 def boundary_triangles(tets: np.ndarray) -> np.ndarray:
@@ -76,8 +82,9 @@ def _samples(vertices, triangles, count, rng) -> np.ndarray:
     flip = u + v > 1
     u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
     c = corners[pick]
-    return np.vstack([vertices[np.unique(triangles)], c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0])
-                      + v[:, None] * (c[:, 2] - c[:, 0])])
+    return np.vstack(
+        [vertices[np.unique(triangles)], c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])]
+    )
 
 
 def hausdorff(points, triangles, stl_vertices, stl_triangles, count: int = 20000) -> float:
@@ -86,10 +93,12 @@ def hausdorff(points, triangles, stl_vertices, stl_triangles, count: int = 20000
     import igl
 
     rng = np.random.default_rng(0)
-    one = igl.point_mesh_squared_distance(_samples(points, triangles, count, rng), stl_vertices,
-                                          stl_triangles.astype(np.int64))[0]
-    two = igl.point_mesh_squared_distance(_samples(stl_vertices, stl_triangles, count, rng), points,
-                                          triangles.astype(np.int64))[0]
+    one = igl.point_mesh_squared_distance(
+        _samples(points, triangles, count, rng), stl_vertices, stl_triangles.astype(np.int64)
+    )[0]
+    two = igl.point_mesh_squared_distance(
+        _samples(stl_vertices, stl_triangles, count, rng), points, triangles.astype(np.int64)
+    )[0]
     return float(np.sqrt(max(one.max(), two.max())))
 
 
@@ -98,13 +107,15 @@ def measure(points, tets, stl, cad_volume: float, size: float) -> dict:
     figures = tet_measures(points, tets)
     figures["volume_error_stl"] = figures["volume"] / stl.volume - 1
     figures["volume_error_cad"] = figures["volume"] / cad_volume - 1
-    figures["hausdorff"] = hausdorff(points, boundary_triangles(tets), np.asarray(stl.vertices, dtype=float),
-                                     np.asarray(stl.faces))
+    figures["hausdorff"] = hausdorff(
+        points, boundary_triangles(tets), np.asarray(stl.vertices, dtype=float), np.asarray(stl.faces)
+    )
     figures["hausdorff_over_h"] = figures["hausdorff"] / size
     return figures
 
 
 # ----------------------------------------------------------------------------------------------- runs
+
 
 def _error_line(stderr: str, code: int) -> str:
     """The first error line of a failed run (a traceback's last line)."""
@@ -152,8 +163,9 @@ def run_gmsh(stl: Path, folder: Path, size: float, timeout: float) -> dict:
     """Gmsh (``--gmsh`` worker below) on ``stl``; status, wall and meshing seconds, and the mesh if any."""
     folder.mkdir(parents=True, exist_ok=True)
     out = folder / "gmsh.npz"
-    code, stderr, seconds = _run([sys.executable, str(Path(__file__).resolve()), "--gmsh", str(stl), str(size),
-                                  str(out)], timeout, folder)
+    code, stderr, seconds = _run(
+        [sys.executable, str(Path(__file__).resolve()), "--gmsh", str(stl), str(size), str(out)], timeout, folder
+    )
     result = {"exit_code": code, "seconds": seconds}
     if code != 0:
         result["error"] = f"timeout after {timeout:g} s" if code is None else _error_line(stderr, code)
@@ -189,19 +201,20 @@ def gmsh_worker(stl: str, size: float, out: str) -> None:
     _, nodes = gmsh.model.mesh.getElementsByType(4)
     index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
-    np.savez(out, points=coordinates.reshape(-1, 3), tets=index[nodes.astype(np.int64)].reshape(-1, 4),
-             seconds=seconds)
+    np.savez(out, points=coordinates.reshape(-1, 3), tets=index[nodes.astype(np.int64)].reshape(-1, 4), seconds=seconds)
     gmsh.finalize()
 
 
 # ----------------------------------------------------------------------------------------------- bench
 
+
 def bench(parts_dir: Path, work: Path, names, timeout: float) -> dict:
     """Generate the corpus into ``parts_dir`` and run every case; the results (JSON-ready)."""
     import trimesh
 
-    commit = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True,
-                            cwd=HERE).stdout.strip()
+    commit = subprocess.run(
+        ["git", "describe", "--always", "--dirty"], capture_output=True, text=True, cwd=HERE
+    ).stdout.strip()
     spec = importlib.util.spec_from_file_location("make_parts", MAKE_PARTS)
     make_parts = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make_parts)
@@ -217,8 +230,9 @@ def bench(parts_dir: Path, work: Path, names, timeout: float) -> dict:
         size = float(np.linalg.norm(stl.extents)) / SIZE_FROM_SCALE
         case = f"{entry['name']}-{entry['tessellation']}"
         row = {**entry, "size": size, "stl_volume": float(stl.volume)}
-        runs = {run: run_fuzzymesh(stl_path, work / case / run, None if run == "default" else run, timeout)
-                for run in RUNS}
+        runs = {
+            run: run_fuzzymesh(stl_path, work / case / run, None if run == "default" else run, timeout) for run in RUNS
+        }
         runs["gmsh"] = run_gmsh(stl_path, work / case / "gmsh", size, timeout)
         for run, result in runs.items():
             mesh = result.pop("mesh", None)
@@ -226,12 +240,23 @@ def bench(parts_dir: Path, work: Path, names, timeout: float) -> dict:
                 result.update(measure(*mesh, stl, entry["cad_volume"], size))
             row[run] = result
         rows.append(row)
-        print(case, *(f"{run}: {r.get('error', 'ok')} {r['seconds']:.1f}s" for run, r in runs.items()), sep=" | ",
-              flush=True)
-    return {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "commit": commit,
-            "machine": platform.node(),
-            "cpus": os.cpu_count(), "load_average": [load, os.getloadavg()[0]], "timeout": timeout, "runs_per_case": 1, "generation_seconds": generation,
-            "rows": rows}
+        print(
+            case,
+            *(f"{run}: {r.get('error', 'ok')} {r['seconds']:.1f}s" for run, r in runs.items()),
+            sep=" | ",
+            flush=True,
+        )
+    return {
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "commit": commit,
+        "machine": platform.node(),
+        "cpus": os.cpu_count(),
+        "load_average": [load, os.getloadavg()[0]],
+        "timeout": timeout,
+        "runs_per_case": 1,
+        "generation_seconds": generation,
+        "rows": rows,
+    }
 
 
 def _cell(result: dict, key: str, scale: float = 1.0, digits: int = 1) -> str:
@@ -242,39 +267,63 @@ def _cell(result: dict, key: str, scale: float = 1.0, digits: int = 1) -> str:
 def markdown(results: dict) -> str:
     """The results as a page: a summary, then one table per mesher run."""
     rows = results["rows"]
-    titles = {"default": "fuzzymesh, default job (no recipe, size = diagonal / 40)",
-              "static-stress": "fuzzymesh, `recipe: static-stress`",
-              "gmsh": "Gmsh 3-D Delaunay from the STL (classifySurfaces 40 deg + createGeometry, MeshSizeMax = "
-                      "diagonal / 40)"}
+    titles = {
+        "default": "fuzzymesh, default job (no recipe, size = diagonal / 40)",
+        "static-stress": "fuzzymesh, `recipe: static-stress`",
+        "gmsh": "Gmsh 3-D Delaunay from the STL (classifySurfaces 40 deg + createGeometry, MeshSizeMax = "
+        "diagonal / 40)",
+    }
     ok = {run: sum("error" not in row[run] for row in rows) for run in titles}
-    lines = ["# Real parts: fuzzymesh and Gmsh on the machined-style corpus", "",
-             f"{len(rows)} cases ({len(rows) // 2} parts of `tests/parts/make_parts.py`, each at a coarse 15 deg and a "
-             f"fine 5 deg CAD tessellation), generated in {results['generation_seconds']:.1f} s. Run "
-             f"{results['date']} (code at {results['commit']}) on {results['cpus']} cores, one run per case (times are single runs, not medians), "
-             f"timeout {results['timeout']:g} s per run. Made by `python bench/parts.py`.", "",
-             f"Meshed: fuzzymesh default {ok['default']}/{len(rows)}, fuzzymesh static-stress "
-             f"{ok['static-stress']}/{len(rows)}, Gmsh {ok['gmsh']}/{len(rows)}.", "",
-             *([f"One-minute load average at the start and the end: {results['load_average'][0]:.1f}, "
+    lines = [
+        "# Real parts: fuzzymesh and Gmsh on the machined-style corpus",
+        "",
+        f"{len(rows)} cases ({len(rows) // 2} parts of `tests/parts/make_parts.py`, each at a coarse 15 deg and a "
+        f"fine 5 deg CAD tessellation), generated in {results['generation_seconds']:.1f} s. Run "
+        f"{results['date']} (code at {results['commit']}) on {results['cpus']} cores, one run per case "
+        f"(times are single runs, not medians), "
+        f"timeout {results['timeout']:g} s per run. Made by `python bench/parts.py`.",
+        "",
+        f"Meshed: fuzzymesh default {ok['default']}/{len(rows)}, fuzzymesh static-stress "
+        f"{ok['static-stress']}/{len(rows)}, Gmsh {ok['gmsh']}/{len(rows)}.",
+        "",
+        *(
+            [
+                f"One-minute load average at the start and the end: {results['load_average'][0]:.1f}, "
                 f"{results['load_average'][1]:.1f} on {results['cpus']} cores"
-                + (" (above the core count: the times include waiting)." if max(results['load_average']) > results['cpus']
-                   else "."), ""]
-               if "load_average" in results else []),
-             "Every mesh is measured by this script, the same way for both meshers: tets, minimum dihedral angle "
-             "(degrees), volume error against the STL's volume and the exact CAD volume (%), two-sided Hausdorff "
-             "distance between the mesh boundary and the STL (sampled, in units of the size H). Wall: the whole "
-             "subprocess (interpreter start, reading, meshing, writing; fuzzymesh also its report); mesh: "
-             "fuzzymesh's geometry + sizing + packing + meshing stages, Gmsh's merge to 3-D mesh.", ""]
+                + (
+                    " (above the core count: the times include waiting)."
+                    if max(results["load_average"]) > results["cpus"]
+                    else "."
+                ),
+                "",
+            ]
+            if "load_average" in results
+            else []
+        ),
+        "Every mesh is measured by this script, the same way for both meshers: tets, minimum dihedral angle "
+        "(degrees), volume error against the STL's volume and the exact CAD volume (%), two-sided Hausdorff "
+        "distance between the mesh boundary and the STL (sampled, in units of the size H). Wall: the whole "
+        "subprocess (interpreter start, reading, meshing, writing; fuzzymesh also its report); mesh: "
+        "fuzzymesh's geometry + sizing + packing + meshing stages, Gmsh's merge to 3-D mesh.",
+        "",
+    ]
     for run, title in titles.items():
-        lines += [f"## {title}", "",
-                  "| part | tess. | STL tris | status | wall s | mesh s | tets | min dih. | dV STL % | dV CAD % | Hausdorff / H |",
-                  "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+        lines += [
+            f"## {title}",
+            "",
+            "| part | tess. | STL tris | status | wall s | mesh s | tets | min dih. | dV STL % | dV CAD % "
+            "| Hausdorff / H |",
+            "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
         for row in rows:
             r = row[run]
             status = "ok" if "error" not in r else "FAIL: " + r["error"].replace("|", "\\|")
-            lines.append(f"| {row['name']} | {row['tessellation']} | {row['triangles']} | {status} | "
-                         f"{r['seconds']:.1f} | {_cell(r, 'mesh_seconds')} | {r.get('tets', '')} | "
-                         f"{_cell(r, 'min_dihedral')} | {_cell(r, 'volume_error_stl', 100, 3)} | "
-                         f"{_cell(r, 'volume_error_cad', 100, 3)} | {_cell(r, 'hausdorff_over_h', 1, 3)} |")
+            lines.append(
+                f"| {row['name']} | {row['tessellation']} | {row['triangles']} | {status} | "
+                f"{r['seconds']:.1f} | {_cell(r, 'mesh_seconds')} | {r.get('tets', '')} | "
+                f"{_cell(r, 'min_dihedral')} | {_cell(r, 'volume_error_stl', 100, 3)} | "
+                f"{_cell(r, 'volume_error_cad', 100, 3)} | {_cell(r, 'hausdorff_over_h', 1, 3)} |"
+            )
         lines.append("")
     return "\n".join(lines)
 
@@ -292,8 +341,9 @@ def main() -> None:
         gmsh_worker(args.gmsh[0], float(args.gmsh[1]), args.gmsh[2])
         return
     with tempfile.TemporaryDirectory() as scratch:
-        results = bench(args.parts or Path(scratch) / "parts", args.work or Path(scratch) / "work", args.names,
-                        args.timeout)
+        results = bench(
+            args.parts or Path(scratch) / "parts", args.work or Path(scratch) / "work", args.names, args.timeout
+        )
     args.out.with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
     args.out.with_suffix(".md").write_text(markdown(results))
 

@@ -10,16 +10,17 @@ stage. ``--profile`` adds one run under cProfile and the cumulative time of what
 (imports, numba loading or compiling its kernels, Gmsh, pymeshlab, matplotlib, the file writers), which
 overlap (an import inside the report counts for both).
 """
+
 from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 # (label, file suffix, function) of the profile entries whose cumulative time is reported
 ENTRIES = [
@@ -55,12 +56,17 @@ def once(size: float, scale: float | None, profile: str | None) -> dict:
     begin = time.perf_counter()
     from engine.job import job_from_dict
     from engine.pipeline import run
+
     imports = time.perf_counter() - begin
     if scale is None:
-        job = job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "size": size},   # uniform, no recipe
-                            base_dir=Path.cwd(), source="<profile>")
+        job = job_from_dict(
+            {"geometry": {"shape": "plate_cylinder_junction"}, "size": size},  # uniform, no recipe
+            base_dir=Path.cwd(),
+            source="<profile>",
+        )
     else:
         from cases import junction_job
+
         job = job_from_dict(junction_job("junction-edge", scale))
     with tempfile.TemporaryDirectory() as out:
         result = run(dataclasses.replace(job, output_dir=out))
@@ -74,9 +80,14 @@ def once(size: float, scale: float | None, profile: str | None) -> dict:
 def entries(path: str) -> list[tuple[str, float]]:
     import pstats
 
-    stats = pstats.Stats(path).stats   # (file, line, function) -> (calls, primitive calls, total, cumulative, callers)
-    return [(label, sum(value[3] for (file, _, function), value in stats.items()
-                        if file.endswith(suffix) and function == name)) for label, suffix, name in ENTRIES]
+    stats = pstats.Stats(path).stats  # (file, line, function) -> (calls, primitive calls, total, cumulative, callers)
+    return [
+        (
+            label,
+            sum(value[3] for (file, _, function), value in stats.items() if file.endswith(suffix) and function == name),
+        )
+        for label, suffix, name in ENTRIES
+    ]
 
 
 def main() -> None:
@@ -93,8 +104,12 @@ def main() -> None:
 
     def fresh(profile=""):
         scale = ["--scale", str(args.scale)] if args.scale is not None else []
-        done = subprocess.run([sys.executable, __file__, "--size", str(args.size), *scale, "--once", profile],
-                              capture_output=True, text=True, check=True)
+        done = subprocess.run(
+            [sys.executable, __file__, "--size", str(args.size), *scale, "--once", profile],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         return json.loads(done.stdout.splitlines()[-1])
 
     runs = [fresh() for _ in range(args.repeats)]

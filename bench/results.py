@@ -1,11 +1,12 @@
 """The benchmark's tables (bench/results.md) and scaling plot (bench/scaling.png) from its results dict."""
+
 from __future__ import annotations
 
 from harness import MESH_STAGES
 
 FM_STAGES = MESH_STAGES["fuzzymesh"]
 GMSH_STAGES = MESH_STAGES["gmsh-delaunay"]
-ANALYSIS = ("quality", "boundary", "conformity", "audit")   # the rest of engine.pipeline.run
+ANALYSIS = ("quality", "boundary", "conformity", "audit")  # the rest of engine.pipeline.run
 
 
 def scaling(results: dict) -> list[dict]:
@@ -17,11 +18,19 @@ def scaling(results: dict) -> list[dict]:
             if "error" in entry:
                 continue
             thousands = entry["tets"] / 1000
-            out.append({"case": row["case"], "tier": row["tier"], "mesher": mesher, "tets": entry["tets"],
-                        "mesh_seconds": entry["mesh_seconds"], "peak_mb": entry["peak_mb"],
-                        "seconds_per_1k_tets": entry["mesh_seconds"] / thousands,
-                        "mb_per_1k_tets": entry["peak_mb"] / thousands,
-                        "mb_above_start_per_1k_tets": (entry["peak_mb"] - entry["start_mb"]) / thousands})
+            out.append(
+                {
+                    "case": row["case"],
+                    "tier": row["tier"],
+                    "mesher": mesher,
+                    "tets": entry["tets"],
+                    "mesh_seconds": entry["mesh_seconds"],
+                    "peak_mb": entry["peak_mb"],
+                    "seconds_per_1k_tets": entry["mesh_seconds"] / thousands,
+                    "mb_per_1k_tets": entry["peak_mb"] / thousands,
+                    "mb_above_start_per_1k_tets": (entry["peak_mb"] - entry["start_mb"]) / thousands,
+                }
+            )
     return out
 
 
@@ -43,27 +52,44 @@ def targets(results: dict) -> list[dict]:
         delaunay, hxt = row["meshers"].get("gmsh-delaunay", {}), row["meshers"].get("gmsh-hxt", {})
         if row["tier"] == TARGET_TIER and "mesh_seconds" in delaunay:
             whole = ours["mesh_seconds"] + ours.get("analysis_seconds", 0.0)
-            out.append({"target": f"{name}: meshing time <= Gmsh Delaunay's",
-                        "measured": f"{ours['mesh_seconds']:.1f} s / {delaunay['mesh_seconds']:.1f} s = "
-                                    f"{ours['mesh_seconds'] / delaunay['mesh_seconds']:.2f} (with the analysis "
-                                    f"stages {whole:.1f} s = {whole / delaunay['mesh_seconds']:.2f})",
-                        "met": ours["mesh_seconds"] <= delaunay["mesh_seconds"]})
+            out.append(
+                {
+                    "target": f"{name}: meshing time <= Gmsh Delaunay's",
+                    "measured": f"{ours['mesh_seconds']:.1f} s / {delaunay['mesh_seconds']:.1f} s = "
+                    f"{ours['mesh_seconds'] / delaunay['mesh_seconds']:.2f} (with the analysis "
+                    f"stages {whole:.1f} s = {whole / delaunay['mesh_seconds']:.2f})",
+                    "met": ours["mesh_seconds"] <= delaunay["mesh_seconds"],
+                }
+            )
         if row["tier"] == TARGET_TIER:
             peak = ours.get("peak_mb_pipeline", ours["peak_mb"])
-            out.append({"target": f"{name}: peak memory <= {MEMORY_LIMIT_MB} MB", "measured": f"{peak:.0f} MB",
-                        "met": peak <= MEMORY_LIMIT_MB})
+            out.append(
+                {
+                    "target": f"{name}: peak memory <= {MEMORY_LIMIT_MB} MB",
+                    "measured": f"{peak:.0f} MB",
+                    "met": peak <= MEMORY_LIMIT_MB,
+                }
+            )
         if "min_dihedral" in hxt:
-            out.append({"target": f"{name}: min dihedral >= Gmsh HXT's",
-                        "measured": f"{ours['min_dihedral']:.2f}° / {hxt['min_dihedral']:.2f}°",
-                        "met": ours["min_dihedral"] >= hxt["min_dihedral"]})
+            out.append(
+                {
+                    "target": f"{name}: min dihedral >= Gmsh HXT's",
+                    "measured": f"{ours['min_dihedral']:.2f}° / {hxt['min_dihedral']:.2f}°",
+                    "met": ours["min_dihedral"] >= hxt["min_dihedral"],
+                }
+            )
     paper = results.get("paper_scale")
     if paper:
-        out.append({"target": f"paper scale ({paper['tets']:,} tets, {paper['job']}): job to mesh "
-                              f"< {PAPER_SCALE_SECONDS:g} s",
-                    "measured": f"{paper['mesh']['median']:.2f} s (with the files and the HTML report "
-                                f"{paper['mesh_and_files']['median']:.2f} s; as a new process "
-                                f"{paper['command']['median']:.2f} s)",
-                    "met": paper["mesh"]["median"] < PAPER_SCALE_SECONDS})
+        out.append(
+            {
+                "target": f"paper scale ({paper['tets']:,} tets, {paper['job']}): job to mesh "
+                f"< {PAPER_SCALE_SECONDS:g} s",
+                "measured": f"{paper['mesh']['median']:.2f} s (with the files and the HTML report "
+                f"{paper['mesh_and_files']['median']:.2f} s; as a new process "
+                f"{paper['command']['median']:.2f} s)",
+                "met": paper["mesh"]["median"] < PAPER_SCALE_SECONDS,
+            }
+        )
     return out
 
 
@@ -79,8 +105,9 @@ def _loads(machine: dict) -> str:
 
 
 def _start(results: dict, mesher: str) -> str:
-    starts = [row["meshers"][mesher]["start_mb"] for row in results["rows"]
-              if "start_mb" in row["meshers"].get(mesher, {})]
+    starts = [
+        row["meshers"][mesher]["start_mb"] for row in results["rows"] if "start_mb" in row["meshers"].get(mesher, {})
+    ]
     return f"{min(starts):.0f}" if starts else "—"
 
 
@@ -98,7 +125,8 @@ def markdown(results: dict) -> str:
         f"{_loads(machine)}), {machine['platform']}; "
         f"Python {machine['python']}, numpy {machine['numpy']}, numba {machine['numba']} "
         f"({machine['numba_threads']} threads), gmsh {machine['gmsh']}; fuzzymesh {machine['fuzzymesh']}"
-        + (f" (commit {machine['commit']})" if machine.get("commit") else "") + ".",
+        + (f" (commit {machine['commit']})" if machine.get("commit") else "")
+        + ".",
         f"Command: `{settings['command']}`; {settings['repeats']} run(s) per mesher and row, medians; "
         f"numba warm-up before measuring: {_f(results.get('warm_up_seconds'), 1)} s; whole benchmark "
         f"{_f(results.get('seconds'), 0)} s.",
@@ -113,22 +141,26 @@ def markdown(results: dict) -> str:
         "2 threads, curves and surfaces on 1; fuzzymesh's numba kernels on the threads above; every worker with "
         f"OMP_WAIT_POLICY={machine['omp_wait_policy']}. *Meshing* is "
         "solid + sizes -> optimised tetrahedra: fuzzymesh " + " + ".join(FM_STAGES) + " (the sizing field built "
-        "from the rules and the element-count guard included); Gmsh " + " + ".join(GMSH_STAGES)
+        "from the rules and the element-count guard included); Gmsh "
+        + " + ".join(GMSH_STAGES)
         + " (HXT optimises inside its volume stage). Process start-up (imports, Gmsh initialisation) and "
         "fuzzymesh's analysis stages (" + ", ".join(ANALYSIS) + ") are listed apart. *Peak* is the worker's "
         "resident-memory high-water mark at the end of meshing (VmHWM, Python and imports included). Quality and "
         "size conformity (edge length / h at the edge's midpoint, share within the band) come from "
         "`engine.quality` on every mesh, whoever made it.",
         "",
-        "## Targets", "",
-        "| target | measured (fuzzymesh / Gmsh) | met |", "|---|---|---|",
+        "## Targets",
+        "",
+        "| target | measured (fuzzymesh / Gmsh) | met |",
+        "|---|---|---|",
         *[f"| {t['target']} | {t['measured']} | {'yes' if t['met'] else '**no**'} |" for t in targets(results)],
         "",
         "The paper-scale time is `engine.pipeline.run(job, write=False)` in a warm process (numba's kernels "
         "loaded): geometry, sizing, packing, meshing and the quality, boundary, conformity and audit stages "
         "(bench/paper_scale.py, medians).",
         "",
-        "## Results", "",
+        "## Results",
+        "",
         "| case | tier | mesher | tets | nodes | meshing s | peak MB | CPU s | min dihedral ° | 1st pct dihedral ° "
         "| < 10° | min radius ratio | 1st pct radius ratio | edge/h median | within band | volume error |",
         "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
@@ -144,60 +176,115 @@ def markdown(results: dict) -> str:
                 f"| {_f(e['peak_mb'], 0)} | {_f(e['cpu_seconds'])} | {_f(e['min_dihedral'])} | {_f(e['p01_dihedral'])} "
                 f"| {e['below_10_degrees']:,} | {_f(e['min_radius_ratio'], 3)} | {_f(e['p01_radius_ratio'], 3)} "
                 f"| {_f(e['conformity_median'], 3)} | {100 * e['conformity_within']:.1f} % "
-                f"| {100 * e['volume_error']:+.3f} % |")
-    lines += ["", "### fuzzymesh / Gmsh", "",
-              "Below 1 is better for fuzzymesh for time and memory, above 1 for the angles and radius ratios.", "",
-              "| case | tier | against | meshing time | peak memory | CPU time | tets | min dihedral | 1st pct dihedral "
-              "| min radius ratio | 1st pct radius ratio | within band |",
-              "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+                f"| {100 * e['volume_error']:+.3f} % |"
+            )
+    lines += [
+        "",
+        "### fuzzymesh / Gmsh",
+        "",
+        "Below 1 is better for fuzzymesh for time and memory, above 1 for the angles and radius ratios.",
+        "",
+        "| case | tier | against | meshing time | peak memory | CPU time | tets | min dihedral | 1st pct dihedral "
+        "| min radius ratio | 1st pct radius ratio | within band |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for row in results["rows"]:
         for against, r in row["ratios"].items():
-            lines.append(f"| {row['case']} | {row['tier']} | {against} | "
-                         + " | ".join(_f(r[k], 3) for k in ("mesh_seconds", "peak_mb", "cpu_seconds", "tets",
-                                                             "min_dihedral", "p01_dihedral", "min_radius_ratio",
-                                                             "p01_radius_ratio", "conformity_within")) + " |")
-    lines += ["", "### Sizes", "",
-              "| case | tier | scale | H | h min–max | size grid | Gmsh asks for our h: curve points, largest "
-              "relative difference | fuzzymesh used the same grid |",
-              "|---|---|---:|---:|---|---|---|---|"]
+            lines.append(
+                f"| {row['case']} | {row['tier']} | {against} | "
+                + " | ".join(
+                    _f(r[k], 3)
+                    for k in (
+                        "mesh_seconds",
+                        "peak_mb",
+                        "cpu_seconds",
+                        "tets",
+                        "min_dihedral",
+                        "p01_dihedral",
+                        "min_radius_ratio",
+                        "p01_radius_ratio",
+                        "conformity_within",
+                    )
+                )
+                + " |"
+            )
+    lines += [
+        "",
+        "### Sizes",
+        "",
+        "| case | tier | scale | H | h min–max | size grid | Gmsh asks for our h: curve points, largest "
+        "relative difference | fuzzymesh used the same grid |",
+        "|---|---|---:|---:|---|---|---|---|",
+    ]
     for row in results["rows"]:
         field = row["size_field"]
         probe = field.get("gmsh_probe")
-        lines.append(f"| {row['case']} | {row['tier']} | {row['scale']:g} | {row['global_size']:.4g} "
-                     f"| {row['h']['min']:.4g}–{row['h']['max']:.4g} | {' x '.join(map(str, field['grid']))}, "
-                     f"cell {field['cell']:.4g} | "
-                     + (f"{probe['samples']:,}, {probe['max_relative_difference']:.1e}" if probe else "—")
-                     + f" | {({True: 'yes', False: 'NO'}).get(field.get('same_as_fuzzymesh'), '—')} |")
-    lines += ["", "## Stages (median seconds)", "",
-              "| case | tier | fuzzymesh start-up | " + " / ".join(FM_STAGES) + " | " + " / ".join(ANALYSIS)
-              + " | peak MB: meshing / whole pipeline |", "|---|---|---:|---|---|---|"]
+        lines.append(
+            f"| {row['case']} | {row['tier']} | {row['scale']:g} | {row['global_size']:.4g} "
+            f"| {row['h']['min']:.4g}–{row['h']['max']:.4g} | {' x '.join(map(str, field['grid']))}, "
+            f"cell {field['cell']:.4g} | "
+            + (f"{probe['samples']:,}, {probe['max_relative_difference']:.1e}" if probe else "—")
+            + f" | {({True: 'yes', False: 'NO'}).get(field.get('same_as_fuzzymesh'), '—')} |"
+        )
+    lines += [
+        "",
+        "## Stages (median seconds)",
+        "",
+        "| case | tier | fuzzymesh start-up | "
+        + " / ".join(FM_STAGES)
+        + " | "
+        + " / ".join(ANALYSIS)
+        + " | peak MB: meshing / whole pipeline |",
+        "|---|---|---:|---|---|---|",
+    ]
     for row in results["rows"]:
         e = row["meshers"].get("fuzzymesh")
         if e and "error" not in e:
-            lines.append(f"| {row['case']} | {row['tier']} | {_f(e['startup_seconds'])} | {_stages(e, FM_STAGES)} "
-                         f"| {_stages(e, ANALYSIS)} | {_f(e['peak_mb'], 0)} / {_f(e['peak_mb_pipeline'], 0)} |")
+            lines.append(
+                f"| {row['case']} | {row['tier']} | {_f(e['startup_seconds'])} | {_stages(e, FM_STAGES)} "
+                f"| {_stages(e, ANALYSIS)} | {_f(e['peak_mb'], 0)} / {_f(e['peak_mb_pipeline'], 0)} |"
+            )
     lines += ["", "| case | tier | mesher | start-up | " + " / ".join(GMSH_STAGES) + " |", "|---|---|---|---:|---|"]
     for row in results["rows"]:
         for mesher, e in row["meshers"].items():
             if mesher != "fuzzymesh" and "error" not in e:
-                lines.append(f"| {row['case']} | {row['tier']} | {mesher} | {_f(e['startup_seconds'])} "
-                             f"| {_stages(e, GMSH_STAGES)} |")
-    lines += ["", "## Scaling: seconds and MB per 1,000 tetrahedra", "",
-              "Meshing seconds, peak MB and peak MB above the worker's footprint when meshing started (Python, "
-              "imports, Gmsh initialised: fuzzymesh ~" + _start(results, "fuzzymesh") + " MB, Gmsh ~"
-              + _start(results, "gmsh-delaunay") + " MB), over thousands of tetrahedra (each mesher's own count).", ""]
+                lines.append(
+                    f"| {row['case']} | {row['tier']} | {mesher} | {_f(e['startup_seconds'])} "
+                    f"| {_stages(e, GMSH_STAGES)} |"
+                )
+    lines += [
+        "",
+        "## Scaling: seconds and MB per 1,000 tetrahedra",
+        "",
+        "Meshing seconds, peak MB and peak MB above the worker's footprint when meshing started (Python, "
+        "imports, Gmsh initialised: fuzzymesh ~"
+        + _start(results, "fuzzymesh")
+        + " MB, Gmsh ~"
+        + _start(results, "gmsh-delaunay")
+        + " MB), over thousands of tetrahedra (each mesher's own count).",
+        "",
+    ]
     table = scaling(results)
     tiers = list(dict.fromkeys(r["tier"] for r in table))
-    lines += ["| case | mesher | " + " | ".join(f"{t}: s / 1k, MB / 1k, MB above start / 1k" for t in tiers) + " |",
-              "|---|---|" + "---:|" * len(tiers)]
+    lines += [
+        "| case | mesher | " + " | ".join(f"{t}: s / 1k, MB / 1k, MB above start / 1k" for t in tiers) + " |",
+        "|---|---|" + "---:|" * len(tiers),
+    ]
     for case in dict.fromkeys(r["case"] for r in table):
         for mesher in dict.fromkeys(r["mesher"] for r in table):
             cells = {r["tier"]: r for r in table if r["case"] == case and r["mesher"] == mesher}
             if cells:
-                lines.append(f"| {case} | {mesher} | " + " | ".join(
-                    f"{cells[t]['seconds_per_1k_tets']:.3f}, {cells[t]['mb_per_1k_tets']:.2f}, "
-                    f"{cells[t]['mb_above_start_per_1k_tets']:.2f}" if t in cells else "—"
-                    for t in tiers) + " |")
+                lines.append(
+                    f"| {case} | {mesher} | "
+                    + " | ".join(
+                        f"{cells[t]['seconds_per_1k_tets']:.3f}, {cells[t]['mb_per_1k_tets']:.2f}, "
+                        f"{cells[t]['mb_above_start_per_1k_tets']:.2f}"
+                        if t in cells
+                        else "—"
+                        for t in tiers
+                    )
+                    + " |"
+                )
     if results.get("plot"):
         lines += ["", f"![time and memory per 1,000 tetrahedra]({results['plot']})"]
     return "\n".join(lines) + "\n"
@@ -214,14 +301,25 @@ def plot_scaling(results: dict, path) -> None:
     colours = {"fuzzymesh": "#4477aa", "gmsh-delaunay": "#ee6677", "gmsh-hxt": "#228833"}
     styles = ["-", "--", ":", "-."]
     figure, axes = plt.subplots(1, 2, figsize=(9, 3.4))
-    for (key, label), axis in zip((("seconds_per_1k_tets", "meshing seconds per 1k tets"),
-                                   ("mb_above_start_per_1k_tets", "peak MB above start-up per 1k tets")), axes):
+    for (key, label), axis in zip(
+        (
+            ("seconds_per_1k_tets", "meshing seconds per 1k tets"),
+            ("mb_above_start_per_1k_tets", "peak MB above start-up per 1k tets"),
+        ),
+        axes,
+    ):
         for c, case in enumerate(dict.fromkeys(r["case"] for r in table)):
             for mesher in dict.fromkeys(r["mesher"] for r in table):
                 points = sorted((r["tets"], r[key]) for r in table if r["case"] == case and r["mesher"] == mesher)
                 if points:
-                    axis.plot(*zip(*points), styles[c % len(styles)], marker="o", markersize=3,
-                              color=colours.get(mesher, "k"), label=f"{mesher}, {case}")
+                    axis.plot(
+                        *zip(*points),
+                        styles[c % len(styles)],
+                        marker="o",
+                        markersize=3,
+                        color=colours.get(mesher, "k"),
+                        label=f"{mesher}, {case}",
+                    )
         axis.set_xscale("log")
         axis.set_yscale("log")
         axis.set_xlabel("tetrahedra")
@@ -231,4 +329,3 @@ def plot_scaling(results: dict, path) -> None:
     figure.tight_layout()
     figure.savefig(path, dpi=80)
     plt.close(figure)
-

@@ -12,6 +12,7 @@ each (under 3 minutes on the 2-core reference machine). ``--scale S`` replaces t
 row with every size x S (S = 1: the junction-edge recipe at H = 1.8, about 1M tets).
 Needs the bench extra: ``pip install ".[bench]"`` (Gmsh with OpenCASCADE and HXT, matplotlib).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,8 +47,10 @@ def missing_requirement() -> str | None:
         gmsh.finalize()
     lacking = [name for name in ("OpenCASCADE", "Hxt") if name not in options]
     if lacking:
-        return (f"this Gmsh ({gmsh.__version__}) is built without {' and '.join(lacking)}; "
-                "install the pip wheel: pip install gmsh")
+        return (
+            f"this Gmsh ({gmsh.__version__}) is built without {' and '.join(lacking)}; "
+            "install the pip wheel: pip install gmsh"
+        )
     return None
 
 
@@ -56,8 +59,7 @@ def parse(argv=None) -> argparse.Namespace:
     from harness import MESHERS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="the 10k and 100k rows, one run each (< 3 min)")
+    parser.add_argument("--quick", action="store_true", help="the 10k and 100k rows, one run each (< 3 min)")
     parser.add_argument("--repeats", type=int, help="runs per mesher and row (default 3, --quick 1)")
     parser.add_argument("--cases", nargs="+", choices=list(OFFSETS), help="default: both")
     parser.add_argument("--tiers", nargs="+", choices=list(TIERS), help="default: all")
@@ -65,11 +67,19 @@ def parse(argv=None) -> argparse.Namespace:
     parser.add_argument("--meshers", nargs="+", choices=MESHERS, default=list(MESHERS))
     parser.add_argument("--out", type=Path, default=HERE, help="folder for results.json, results.md, scaling.png")
     parser.add_argument("--note", default="", help="a line shown at the top of results.md")
-    parser.add_argument("--no-warm-up", dest="warm_up", action="store_false",
-                        help="skip the small run that makes sure numba's kernels are compiled")
+    parser.add_argument(
+        "--no-warm-up",
+        dest="warm_up",
+        action="store_false",
+        help="skip the small run that makes sure numba's kernels are compiled",
+    )
     parser.add_argument("--no-plot", dest="plot", action="store_false")
-    parser.add_argument("--no-paper-scale", dest="paper_scale", action="store_false",
-                        help="skip the paper-scale end-to-end timing (bench/paper_scale.py, the Fig. 9 example)")
+    parser.add_argument(
+        "--no-paper-scale",
+        dest="paper_scale",
+        action="store_false",
+        help="skip the paper-scale end-to-end timing (bench/paper_scale.py, the Fig. 9 example)",
+    )
     args = parser.parse_args(argv)
     if args.repeats is not None and args.repeats < 1:
         parser.error("--repeats must be at least 1")
@@ -88,8 +98,12 @@ def paper_scale(repeats: int, folder: Path) -> dict:
 
     out = folder / "paper-scale.json"
     logging.getLogger("bench").info("paper scale (examples/connected-uniform-nonuniform.yaml) x %d", repeats)
-    subprocess.run([sys.executable, str(HERE / "paper_scale.py"), "--repeats", str(repeats), "--json", str(out)],
-                   check=True, capture_output=True, env={**os.environ, "OMP_WAIT_POLICY": OMP_WAIT_POLICY})
+    subprocess.run(
+        [sys.executable, str(HERE / "paper_scale.py"), "--repeats", str(repeats), "--json", str(out)],
+        check=True,
+        capture_output=True,
+        env={**os.environ, "OMP_WAIT_POLICY": OMP_WAIT_POLICY},
+    )
     return json.loads(out.read_text())
 
 
@@ -108,10 +122,19 @@ def main(argv=None) -> int:
     begin = time.perf_counter()
     rows = [(f"x{args.scale:g}", args.scale)] if args.scale else [(tier, TIERS[tier]) for tier in args.tiers]
     command = "python bench/run.py" + "".join(f" {shlex.quote(a)}" for a in (sys.argv[1:] if argv is None else argv))
-    results = {"format": "fuzzymesh-bench/1", "machine": machine_info(),
-               "settings": {"command": command, "repeats": args.repeats, "cases": args.cases,
-                            "rows": [name for name, _ in rows], "meshers": args.meshers, "note": args.note},
-               "rows": []}
+    results = {
+        "format": "fuzzymesh-bench/1",
+        "machine": machine_info(),
+        "settings": {
+            "command": command,
+            "repeats": args.repeats,
+            "cases": args.cases,
+            "rows": [name for name, _ in rows],
+            "meshers": args.meshers,
+            "note": args.note,
+        },
+        "rows": [],
+    }
     with tempfile.TemporaryDirectory(prefix="fuzzymesh-bench-") as folder:
         if args.warm_up and "fuzzymesh" in args.meshers:
             results["warm_up_seconds"] = warm_up(Path(folder))
@@ -130,8 +153,11 @@ def main(argv=None) -> int:
         results["plot"] = "scaling.png"
     (args.out / "results.json").write_text(json.dumps(results, indent=1))
     (args.out / "results.md").write_text(markdown(results))
-    print(f"wrote {args.out / 'results.md'}, {args.out / 'results.json'}"
-          + (f", {args.out / 'scaling.png'}" if args.plot else "") + f" ({results['seconds']:.0f} s)")
+    print(
+        f"wrote {args.out / 'results.md'}, {args.out / 'results.json'}"
+        + (f", {args.out / 'scaling.png'}" if args.plot else "")
+        + f" ({results['seconds']:.0f} s)"
+    )
     return 0
 
 

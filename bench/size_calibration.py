@@ -9,6 +9,7 @@ tetrahedra and nodes against the estimate, and the time.
     python bench/size_calibration.py                 # the packer settings in force
     python bench/size_calibration.py --diameter 1.0  # another bubble diameter / h, for calibration
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,11 +28,12 @@ CASES = [  # (name, job)
     ("plate", {"geometry": {"shape": "plate"}}),
     ("plate H20", {"geometry": {"shape": "plate"}, "size": 20.0}),
     ("plate_with_hole", {"geometry": {"shape": "plate_with_hole"}}),
-    ("plate_with_hole static-stress", {"geometry": {"shape": "plate_with_hole"}, "size": 10, "min_size": 2,
-                                       "recipe": "static-stress"}),
+    (
+        "plate_with_hole static-stress",
+        {"geometry": {"shape": "plate_with_hole"}, "size": 10, "min_size": 2, "recipe": "static-stress"},
+    ),
     ("junction", {"geometry": {"shape": "plate_cylinder_junction"}}),
-    ("junction-edge H12", {"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0,
-                           "recipe": "junction-edge"}),
+    ("junction-edge H12", {"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0, "recipe": "junction-edge"}),
     ("l_bracket", {"geometry": {"shape": "l_bracket"}}),
     ("l_bracket H8", {"geometry": {"shape": "l_bracket"}, "size": 8.0}),
     ("hollow_sphere_octant", {"geometry": {"shape": "hollow_sphere_octant"}}),
@@ -52,9 +54,15 @@ def measure(job: dict, diameter: float | None, packer: str = "bubble") -> dict:
     finally:
         pipeline.load_knowledge = original
     nodes, tets = result.sizing.expected_counts
-    return {"median": result.conformity["median"], "element_median": float(np.median(result.audit.cells["size_ratio"])),
-            "tets": len(result.mesh.tets), "expected_tets": tets, "nodes": len(result.mesh.points),
-            "expected_nodes": nodes, "seconds": seconds}
+    return {
+        "median": result.conformity["median"],
+        "element_median": float(np.median(result.audit.cells["size_ratio"])),
+        "tets": len(result.mesh.tets),
+        "expected_tets": tets,
+        "nodes": len(result.mesh.points),
+        "expected_nodes": nodes,
+        "seconds": seconds,
+    }
 
 
 def main() -> None:
@@ -71,9 +79,11 @@ def main() -> None:
             continue
         m = measure(job, args.diameter, args.packer)
         medians.append(m["median"])
-        print(f"{name:32s} {m['median']:7.3f} {m['element_median']:7.3f} {m['tets']:8d} "
-              f"{m['tets'] / m['expected_tets']:6.3f} {m['nodes'] / m['expected_nodes']:9.3f} {m['seconds']:6.1f}",
-              flush=True)
+        print(
+            f"{name:32s} {m['median']:7.3f} {m['element_median']:7.3f} {m['tets']:8d} "
+            f"{m['tets'] / m['expected_tets']:6.3f} {m['nodes'] / m['expected_nodes']:9.3f} {m['seconds']:6.1f}",
+            flush=True,
+        )
     print(f"median edge/h over the cases: {min(medians):.3f} to {max(medians):.3f}")
 
 

@@ -8,6 +8,7 @@ file (Gmsh), and where to save the mesh (``mesh``: an .npz with ``points`` and `
 the seconds per stage, the resident-memory high-water mark after each stage and the CPU seconds.
 Only the module of the mesher under test is imported: a Gmsh run never loads fuzzymesh.
 """
+
 from __future__ import annotations
 
 import json
@@ -78,12 +79,22 @@ def run_fuzzymesh(spec: dict) -> dict:
     result = pipeline.run(job_from_dict(spec["job"]), write=False)
     np.savez(spec["mesh"], points=result.mesh.points, tets=result.mesh.tets)
     sizing = result.sizing
-    return {"startup": startup, "stages": result.timings, **meter.figures(),
-            "nodes": len(result.mesh.points), "tets": len(result.mesh.tets), "bubbles": len(result.packing),
-            "solid_volume": float(result.geometry.volume),
-            "mesher_stats": {k: v for k, v in result.mesh.stats.items() if not isinstance(v, dict)},
-            "size_grid": {"shape": list(sizing.grid.shape), "origin": list(map(float, sizing.origin)),
-                          "cell": float(sizing.cell), "sha1": grid_digest(sizing.grid)}}
+    return {
+        "startup": startup,
+        "stages": result.timings,
+        **meter.figures(),
+        "nodes": len(result.mesh.points),
+        "tets": len(result.mesh.tets),
+        "bubbles": len(result.packing),
+        "solid_volume": float(result.geometry.volume),
+        "mesher_stats": {k: v for k, v in result.mesh.stats.items() if not isinstance(v, dict)},
+        "size_grid": {
+            "shape": list(sizing.grid.shape),
+            "origin": list(map(float, sizing.origin)),
+            "cell": float(sizing.cell),
+            "sha1": grid_digest(sizing.grid),
+        },
+    }
 
 
 def grid_digest(grid) -> str:
@@ -96,11 +107,9 @@ def grid_digest(grid) -> str:
 
 def run_gmsh(spec: dict) -> dict:
     """Gmsh's OpenCASCADE junction meshed with the Structured size field, curves to optimised volume."""
-    import numpy as np
-
-    import gmsh_junction as gj
-
     import gmsh
+    import gmsh_junction as gj
+    import numpy as np
 
     gj.start(gj.THREADS[spec["mesher"]])
     startup, meter, stages = time.perf_counter() - STARTED, Meter(), {}
@@ -116,17 +125,21 @@ def run_gmsh(spec: dict) -> dict:
     points, tets = gj.mesh_arrays()
     np.savez(spec["mesh"], points=points, tets=tets)
     gmsh.finalize()
-    return {"startup": startup, "stages": stages, **meter.figures(), "nodes": len(points), "tets": len(tets),
-            "solid_volume": volume}
+    return {
+        "startup": startup,
+        "stages": stages,
+        **meter.figures(),
+        "nodes": len(points),
+        "tets": len(tets),
+        "solid_volume": volume,
+    }
 
 
 def run_probe(spec: dict) -> dict:
     """The sizes Gmsh asks for along the curves of the junction (see gmsh_junction.probe_sizes)."""
-    import numpy as np
-
-    import gmsh_junction as gj
-
     import gmsh
+    import gmsh_junction as gj
+    import numpy as np
 
     gj.start()
     gj.build_junction(**spec["junction"])
@@ -147,7 +160,7 @@ def main() -> None:
     result = RUNS[spec["mesher"]](spec)
     result["process_seconds"] = time.perf_counter() - STARTED
     with open(result_path, "w") as file:
-        json.dump(result, file, default=float)   # numpy scalars among the mesher's stats
+        json.dump(result, file, default=float)  # numpy scalars among the mesher's stats
 
 
 if __name__ == "__main__":

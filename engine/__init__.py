@@ -3,6 +3,7 @@
 ``engine.mesh(job)`` runs the whole chain on a job (a :class:`~engine.job.Job`,
 a job file path or a dict) and returns a :class:`~engine.pipeline.Result`.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -11,6 +11,7 @@ packer's force kernel (about 1,400 short calls on the paper's junction) took 13 
 whole paper-scale run 29 s instead of 14 s. Sleeping costs a wake-up of tens of microseconds per loop.
 It is read when the OpenMP runtime starts, at the first parallel call, after this module has run.
 """
+
 import os
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

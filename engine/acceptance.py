@@ -16,6 +16,7 @@ The tolerances are expert knowledge: ``acceptance:`` in the sizing defaults (kno
 job's own knowledge files may replace. A failed check raises :class:`~engine.errors.MeshRejected`: one line
 naming the check, where it fails (a point and the nearest patch) and what to do.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,10 +33,10 @@ KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invali
 class Tolerances:
     """The gate's limits; see knowledge/sizing.yaml ``acceptance:``."""
 
-    min_dihedral: float = 5.0         # degrees
-    volume: float = 0.02              # |V_mesh / V_input - 1|
-    hausdorff: float = 0.25           # x the target size h, each direction
-    quadratic_jacobian: float = QUADRATIC_FLOOR   # min scaled Jacobian of a 10-node tet
+    min_dihedral: float = 5.0  # degrees
+    volume: float = 0.02  # |V_mesh / V_input - 1|
+    hausdorff: float = 0.25  # x the target size h, each direction
+    quadratic_jacobian: float = QUADRATIC_FLOOR  # min scaled Jacobian of a 10-node tet
 
 
 def boundary_topology(tets: np.ndarray) -> dict:
@@ -53,12 +54,23 @@ def boundary_topology(tets: np.ndarray) -> dict:
     same_way, way_counts = np.unique(directed, axis=0, return_counts=True)
     misoriented = same_way[way_counts > 1]
     bad = open_edges[:1, 0] if len(open_edges) else misoriented[:1, 0] if len(misoriented) else []
-    return {"faces": boundary, "open_edges": int(len(open_edges)), "misoriented": int(len(misoriented)),
-            "bad_node": int(bad[0]) if len(bad) else -1}
+    return {
+        "faces": boundary,
+        "open_edges": int(len(open_edges)),
+        "misoriented": int(len(misoriented)),
+        "bad_node": int(bad[0]) if len(bad) else -1,
+    }
 
 
-def check_mesh(mesh, geometry, features, quality, boundary: dict, tolerances: Tolerances,
-               quadratic_jacobian: np.ndarray | None = None) -> None:
+def check_mesh(
+    mesh,
+    geometry,
+    features,
+    quality,
+    boundary: dict,
+    tolerances: Tolerances,
+    quadratic_jacobian: np.ndarray | None = None,
+) -> None:
     """Raise MeshRejected at the first check the mesh fails (module docstring); ``quality`` is the
     TetQuality of ``mesh``, ``boundary`` the :func:`engine.quality.boundary_report` of it, and
     ``quadratic_jacobian`` (m,) the scaled Jacobians of its 10-node elements, if any."""
@@ -69,47 +81,68 @@ def check_mesh(mesh, geometry, features, quality, boundary: dict, tolerances: To
 
     flat = np.flatnonzero(quality.volume <= 0)
     if len(flat):
-        raise MeshRejected(f"{len(flat)} tetrahedra of zero or negative volume, the first at "
-                           f"{where(mesh.points[tets[flat[0]]].mean(axis=0))}", check="positive volumes",
-                           fix=f"mesh again with another seed and report the input; {KEEP_INVALID}")
+        raise MeshRejected(
+            f"{len(flat)} tetrahedra of zero or negative volume, the first at "
+            f"{where(mesh.points[tets[flat[0]]].mean(axis=0))}",
+            check="positive volumes",
+            fix=f"mesh again with another seed and report the input; {KEEP_INVALID}",
+        )
     topology = boundary_topology(tets)
     if topology["open_edges"] or topology["misoriented"]:
-        what = (f"{topology['open_edges']} boundary edges not shared by exactly two faces" if topology["open_edges"]
-                else f"{topology['misoriented']} boundary edges with inconsistently oriented faces")
-        raise MeshRejected(f"the boundary is not a closed two-manifold: {what}, e.g. at "
-                           f"{where(mesh.points[topology['bad_node']])}", check="closed two-manifold boundary",
-                           fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}")
+        what = (
+            f"{topology['open_edges']} boundary edges not shared by exactly two faces"
+            if topology["open_edges"]
+            else f"{topology['misoriented']} boundary edges with inconsistently oriented faces"
+        )
+        raise MeshRejected(
+            f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[topology['bad_node']])}",
+            check="closed two-manifold boundary",
+            fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}",
+        )
     error = mesh.volume / geometry.volume - 1
     if not abs(error) <= tolerances.volume:
         worst = boundary["hausdorff_mesh_to_input"] if error > 0 else boundary["hausdorff_input_to_mesh"]
-        raise MeshRejected(f"the mesh volume is {100 * error:+.2f} % of the input's (tolerance "
-                           f"{100 * tolerances.volume:g} %); the boundary strays most at {where(worst['at'])}",
-                           check="volume", fix="refine there (a smaller size, or a pattern placed on that feature) "
-                           f"or raise acceptance.volume in the sizing defaults; {KEEP_INVALID}")
-    for direction, text in (("hausdorff_input_to_mesh", "the input surface is"),
-                            ("hausdorff_mesh_to_input", "the mesh boundary is")):
+        raise MeshRejected(
+            f"the mesh volume is {100 * error:+.2f} % of the input's (tolerance "
+            f"{100 * tolerances.volume:g} %); the boundary strays most at {where(worst['at'])}",
+            check="volume",
+            fix="refine there (a smaller size, or a pattern placed on that feature) "
+            f"or raise acceptance.volume in the sizing defaults; {KEEP_INVALID}",
+        )
+    for direction, text in (
+        ("hausdorff_input_to_mesh", "the input surface is"),
+        ("hausdorff_mesh_to_input", "the mesh boundary is"),
+    ):
         far = boundary[direction]
         if not far["max_over_h"] <= tolerances.hausdorff:
-            raise MeshRejected(f"{text} {far['max_over_h']:.3g} h ({far['at_distance']:.4g}) from the other at "
-                               f"{where(far['at'])} (tolerance {tolerances.hausdorff:g} h)", check="Hausdorff distance",
-                               fix="refine there (a smaller size, or a pattern placed on that feature) or raise "
-                               f"acceptance.hausdorff in the sizing defaults; {KEEP_INVALID}")
+            raise MeshRejected(
+                f"{text} {far['max_over_h']:.3g} h ({far['at_distance']:.4g}) from the other at "
+                f"{where(far['at'])} (tolerance {tolerances.hausdorff:g} h)",
+                check="Hausdorff distance",
+                fix="refine there (a smaller size, or a pattern placed on that feature) or raise "
+                f"acceptance.hausdorff in the sizing defaults; {KEEP_INVALID}",
+            )
     worst = int(np.argmin(quality.min_dihedral))
     if not quality.min_dihedral[worst] >= tolerances.min_dihedral:
         below = int((quality.min_dihedral < tolerances.min_dihedral).sum())
-        raise MeshRejected(f"{below} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the "
-                           f"smallest {quality.min_dihedral[worst]:.3g} deg at "
-                           f"{where(mesh.points[tets[worst]].mean(axis=0))}", check="minimum dihedral angle",
-                           fix="mesh again with another seed or a size that resolves the feature there, or lower "
-                           f"acceptance.min_dihedral in the sizing defaults; {KEEP_INVALID}")
+        raise MeshRejected(
+            f"{below} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the "
+            f"smallest {quality.min_dihedral[worst]:.3g} deg at "
+            f"{where(mesh.points[tets[worst]].mean(axis=0))}",
+            check="minimum dihedral angle",
+            fix="mesh again with another seed or a size that resolves the feature there, or lower "
+            f"acceptance.min_dihedral in the sizing defaults; {KEEP_INVALID}",
+        )
     if quadratic_jacobian is not None and len(quadratic_jacobian):
         worst = int(np.argmin(quadratic_jacobian))
         if not quadratic_jacobian[worst] >= tolerances.quadratic_jacobian:
-            raise MeshRejected(f"a 10-node element has a scaled Jacobian of {quadratic_jacobian[worst]:.3g} (floor "
-                               f"{tolerances.quadratic_jacobian:g}) at {where(mesh.points[tets[worst]].mean(axis=0))}",
-                               check="10-node element validity",
-                               fix="refine the curved surface there (more elements per circle) or lower "
-                               f"acceptance.quadratic_jacobian in the sizing defaults; {KEEP_INVALID}")
+            raise MeshRejected(
+                f"a 10-node element has a scaled Jacobian of {quadratic_jacobian[worst]:.3g} (floor "
+                f"{tolerances.quadratic_jacobian:g}) at {where(mesh.points[tets[worst]].mean(axis=0))}",
+                check="10-node element validity",
+                fix="refine the curved surface there (more elements per circle) or lower "
+                f"acceptance.quadratic_jacobian in the sizing defaults; {KEEP_INVALID}",
+            )
 
 
 def _locate(point: np.ndarray, geometry, features) -> str:
@@ -118,8 +151,9 @@ def _locate(point: np.ndarray, geometry, features) -> str:
 
     from .features import describe
 
-    _, face, _ = igl.point_mesh_squared_distance(point.reshape(1, 3), np.asarray(geometry.mesh.vertices, float),
-                                                 np.asarray(geometry.mesh.faces, np.int64))
+    _, face, _ = igl.point_mesh_squared_distance(
+        point.reshape(1, 3), np.asarray(geometry.mesh.vertices, float), np.asarray(geometry.mesh.faces, np.int64)
+    )
     patch = features.patches[int(features.face_patch[int(face[0])])]
     scale = max(float(np.abs(point).max()), geometry.scale)
     digits = max(3, int(np.ceil(np.log10(scale / (1e-4 * geometry.scale)))) if scale > 0 else 3)

@@ -7,16 +7,16 @@ a pattern's reach (outside the anchor's box grown by the bound) are skipped.
 Gaps between features are measured on samples of their edges, made only when
 a gap is asked for.
 """
+
 from __future__ import annotations
 
 from functools import cached_property
 
-import numpy as np
 import igl
+import numpy as np
 from scipy.spatial import cKDTree
 
-
-WORKERS = -1   # k-d tree queries use every core
+WORKERS = -1  # k-d tree queries use every core
 
 
 class SampledDistance:
@@ -30,8 +30,11 @@ class SampledDistance:
     def __call__(self, points: np.ndarray, bound: float = np.inf) -> np.ndarray:
         """Distances; ``inf`` where farther than ``bound``."""
         distance = np.full(len(points), np.inf)
-        near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1) if np.isfinite(bound) \
+        near = (
+            np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1)
+            if np.isfinite(bound)
             else np.ones(len(points), bool)
+        )
         if near.any():
             distance[near], _ = self.tree.query(points[near], distance_upper_bound=bound, workers=WORKERS)
         return distance
@@ -57,7 +60,8 @@ class FeatureDistance:
         near = np.all((points >= self.lo - bound) & (points <= self.hi + bound), axis=1)
         if near.any():
             squared, _, _ = self.tree.squared_distance(
-                self.vertices, self.simplices, np.ascontiguousarray(points[near], dtype=np.float64))
+                self.vertices, self.simplices, np.ascontiguousarray(points[near], dtype=np.float64)
+            )
             distance[near] = np.sqrt(squared)
         distance[distance > bound] = np.inf
         return distance

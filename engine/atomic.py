@@ -1,4 +1,5 @@
 """All-or-nothing file output: a run writes every file it promised, or none (a leaf module)."""
+
 from __future__ import annotations
 
 import os
@@ -8,7 +9,7 @@ from typing import Callable
 
 from .errors import FuzzymeshError
 
-Target = tuple[Path, Callable[[str], None]]   # (final path, write(temporary path))
+Target = tuple[Path, Callable[[str], None]]  # (final path, write(temporary path))
 
 
 def write_all_or_nothing(targets: list[Target]) -> list[Path]:
@@ -41,8 +42,11 @@ def write_all_or_nothing(targets: list[Target]) -> list[Path]:
             Path(tmp).unlink(missing_ok=True)
         for path in placed:
             path.unlink(missing_ok=True)
-        raise FuzzymeshError(f"cannot write ({exc.strerror or exc})", where=str(current),
-                             fix="choose a writable output folder and file name") from None
+        raise FuzzymeshError(
+            f"cannot write ({exc.strerror or exc})",
+            where=str(current),
+            fix="choose a writable output folder and file name",
+        ) from None
     except BaseException:
         for tmp, _ in staged:
             Path(tmp).unlink(missing_ok=True)

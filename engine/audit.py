@@ -10,6 +10,7 @@ event, insertions and deletions, is kept as columns of the legend's ``events``.
 Integer ids go into the mesh files (ParaView colours them as categories); the legend maps each id
 to its name, source file:line and parameters, and is written as JSON beside the mesh.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,9 +27,9 @@ FORMAT = "fuzzymesh-audit/1"
 
 @dataclass
 class Audit:
-    cells: dict      # name -> (m,) array per element
-    nodes: dict      # name -> (n,) array per node
-    legend: dict     # JSON-ready
+    cells: dict  # name -> (m,) array per element
+    nodes: dict  # name -> (n,) array per node
+    legend: dict  # JSON-ready
 
 
 def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_source: str | None = None) -> Audit:
@@ -43,7 +44,9 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
     edge = mesh.points[mesh.tets[:, EDGES[:, 1]]] - mesh.points[mesh.tets[:, EDGES[:, 0]]]
     h_actual = np.linalg.norm(edge, axis=2).mean(axis=1)
     cells = {
-        "h_target": evaluation.h, "h_actual": h_actual, "size_ratio": h_actual / evaluation.h,
+        "h_target": evaluation.h,
+        "h_actual": h_actual,
+        "size_ratio": h_actual / evaluation.h,
         "winner": winner.astype(np.int32),
         "winner_mu": np.where(winner >= 0, evaluation.mu[rows, np.maximum(winner, 0)], 0.0),
         "runner_up": runner_up.astype(np.int32),
@@ -57,29 +60,65 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
     reached = np.count_nonzero(evaluation.mu > 0, axis=0)
     nodes, rules, events = _node_history(mesh, packing, knowledge)
     legend = {
-        "format": FORMAT, "job": job_source,
+        "format": FORMAT,
+        "job": job_source,
         "pattern_fields": {"elements": "elements it wins", "reached": "elements where its membership is > 0"},
-        "element_fields": {"h_target": "target size at the centroid", "h_actual": "mean edge length",
-                           "size_ratio": "h_actual / h_target", "winner": "index into patterns",
-                           "winner_mu": "membership of the winner", "runner_up": "index into patterns, -1: none",
-                           "runner_up_mu": "membership of the runner-up", "graded": "1 if the gradation limit "
-                           f"lowered the size by more than {100 * GRADED_THRESHOLD:g} %", "gradation": "how much it "
-                           "lowered it (raw size - h)", "zone": "index into zones",
-                           "placement": "index into placements"},
-        "node_fields": {"node_level": "index into levels", "node_entity": "index into corners / curves / patches "
-                        "by level", "bubble": "bubble id, -1 for nodes the mesher added",
-                        "inserted_at": "packing iteration of the inserting event, -1: initial bubble",
-                        "insert_rule": "index into rules, -1: none", "insert_firing": "firing degree"},
-        "event_fields": {"bubble": "bubble id", "level": "packing level", "iteration": "packing iteration (step) "
-                         "of its level", "action": "insert or delete", "rule": "index into rules: the rule that "
-                         "fired most strongly", "firing": "its firing degree"},
-        "global_size": sizing.global_size, "gradation_limit": sizing.gradation,
-        "patterns": [{"index": k, **_plain(p.legend()), "placement_index": int(placement_of[k]),
-                      "elements": int(won[k]), "reached": int(reached[k])} for k, p in enumerate(sizing.placed)],
-        "zones": [{"index": int(zone_offset[k] + j), "pattern": p.id, "id": z.zone.id, "law": z.zone.law,
-                   "source": z.zone.source} for k, p in enumerate(sizing.placed) for j, z in enumerate(p.zones)],
-        "placements": [_placement(next(p.placement for p in sizing.placed if id(p.placement) == key), i)
-                       for i, key in enumerate(placements)],
+        "element_fields": {
+            "h_target": "target size at the centroid",
+            "h_actual": "mean edge length",
+            "size_ratio": "h_actual / h_target",
+            "winner": "index into patterns",
+            "winner_mu": "membership of the winner",
+            "runner_up": "index into patterns, -1: none",
+            "runner_up_mu": "membership of the runner-up",
+            "graded": f"1 if the gradation limit lowered the size by more than {100 * GRADED_THRESHOLD:g} %",
+            "gradation": "how much it lowered it (raw size - h)",
+            "zone": "index into zones",
+            "placement": "index into placements",
+        },
+        "node_fields": {
+            "node_level": "index into levels",
+            "node_entity": "index into corners / curves / patches by level",
+            "bubble": "bubble id, -1 for nodes the mesher added",
+            "inserted_at": "packing iteration of the inserting event, -1: initial bubble",
+            "insert_rule": "index into rules, -1: none",
+            "insert_firing": "firing degree",
+        },
+        "event_fields": {
+            "bubble": "bubble id",
+            "level": "packing level",
+            "iteration": "packing iteration (step) of its level",
+            "action": "insert or delete",
+            "rule": "index into rules: the rule that fired most strongly",
+            "firing": "its firing degree",
+        },
+        "global_size": sizing.global_size,
+        "gradation_limit": sizing.gradation,
+        "patterns": [
+            {
+                "index": k,
+                **_plain(p.legend()),
+                "placement_index": int(placement_of[k]),
+                "elements": int(won[k]),
+                "reached": int(reached[k]),
+            }
+            for k, p in enumerate(sizing.placed)
+        ],
+        "zones": [
+            {
+                "index": int(zone_offset[k] + j),
+                "pattern": p.id,
+                "id": z.zone.id,
+                "law": z.zone.law,
+                "source": z.zone.source,
+            }
+            for k, p in enumerate(sizing.placed)
+            for j, z in enumerate(p.zones)
+        ],
+        "placements": [
+            _placement(next(p.placement for p in sizing.placed if id(p.placement) == key), i)
+            for i, key in enumerate(placements)
+        ],
         "rules": rules,
         "events": events,
         "levels": list(NODE_LEVELS),
@@ -92,12 +131,19 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
 
 def idle_patterns(legend: dict) -> list[str]:
     """One warning per placed pattern that wins no element, saying whether it reaches any."""
-    return [f"placed pattern '{p['id']}' (pattern '{p['pattern']}', placed by {p['origin']} at {p['placement']}) "
-            "wins no element: " + (f"its membership is > 0 at {p['reached']} elements, but another pattern's is "
-                                   "higher (or equal, with a smaller size) at each" if p["reached"] else
-                                   "its membership is 0 at every element") +
-            "; check its placement, parameters and zones with 'fuzzymesh explain JOB --at X Y Z' near it"
-            for p in legend["patterns"] if p["elements"] == 0]
+    return [
+        f"placed pattern '{p['id']}' (pattern '{p['pattern']}', placed by {p['origin']} at {p['placement']}) "
+        "wins no element: "
+        + (
+            f"its membership is > 0 at {p['reached']} elements, but another pattern's is "
+            "higher (or equal, with a smaller size) at each"
+            if p["reached"]
+            else "its membership is 0 at every element"
+        )
+        + "; check its placement, parameters and zones with 'fuzzymesh explain JOB --at X Y Z' near it"
+        for p in legend["patterns"]
+        if p["elements"] == 0
+    ]
 
 
 def _node_history(mesh: TetMesh, packing, knowledge):
@@ -108,8 +154,11 @@ def _node_history(mesh: TetMesh, packing, knowledge):
     events = packing.events
     rule_ids, rule_of_event = np.unique(events.rule.astype(str), return_inverse=True)
     rule_ids, rule_of_event = rule_ids.tolist(), rule_of_event.astype(np.int32)
-    sources = {} if knowledge is None else \
-        {f"{base.id}/{r.id}": r.source for base in knowledge.rulebases.values() for r in base.rules}
+    sources = (
+        {}
+        if knowledge is None
+        else {f"{base.id}/{r.id}": r.source for base in knowledge.rulebases.values() for r in base.rules}
+    )
     inserted_at, insert_rule, insert_firing = np.full(n, -1, np.int32), np.full(n, -1, np.int32), np.zeros(n)
     is_insert = events.action == "insert"
     inserts = np.flatnonzero(is_insert)
@@ -124,20 +173,46 @@ def _node_history(mesh: TetMesh, packing, knowledge):
         insert_firing[found] = events.firing[event]
     insertions = np.bincount(rule_of_event[is_insert], minlength=len(rule_ids))
     deletions = np.bincount(rule_of_event[~is_insert], minlength=len(rule_ids))
-    rules = [{"index": k, "id": r, "source": sources.get(r, ""), "insertions": int(insertions[k]),
-              "deletions": int(deletions[k])} for k, r in enumerate(rule_ids)]
-    table = {"bubble": events.bubble, "level": events.level, "iteration": events.iteration,
-             "action": events.action, "rule": rule_of_event, "firing": events.firing}
-    nodes = {"node_level": mesh.node_level.astype(np.int32), "node_entity": mesh.node_entity.astype(np.int32),
-             "bubble": bubble.astype(np.int64), "inserted_at": inserted_at, "insert_rule": insert_rule,
-             "insert_firing": insert_firing}
+    rules = [
+        {
+            "index": k,
+            "id": r,
+            "source": sources.get(r, ""),
+            "insertions": int(insertions[k]),
+            "deletions": int(deletions[k]),
+        }
+        for k, r in enumerate(rule_ids)
+    ]
+    table = {
+        "bubble": events.bubble,
+        "level": events.level,
+        "iteration": events.iteration,
+        "action": events.action,
+        "rule": rule_of_event,
+        "firing": events.firing,
+    }
+    nodes = {
+        "node_level": mesh.node_level.astype(np.int32),
+        "node_entity": mesh.node_entity.astype(np.int32),
+        "bubble": bubble.astype(np.int64),
+        "inserted_at": inserted_at,
+        "insert_rule": insert_rule,
+        "insert_firing": insert_firing,
+    }
     return nodes, rules, {name: _plain(np.asarray(column)) for name, column in table.items()}
 
 
 def _placement(placement, index: int) -> dict:
-    return {"index": index, "id": placement.id, "pattern": placement.pattern, "origin": placement.origin,
-            "source": placement.source, "at": placement.at, "every": placement.every,
-            "parameters": _plain(placement.parameters)}
+    return {
+        "index": index,
+        "id": placement.id,
+        "pattern": placement.pattern,
+        "origin": placement.origin,
+        "source": placement.source,
+        "at": placement.at,
+        "every": placement.every,
+        "parameters": _plain(placement.parameters),
+    }
 
 
 def _plain(value):
@@ -160,30 +235,42 @@ def explain_element(cells: dict, legend: dict, element: int) -> str:
         raise IndexError(f"element {element} is not in the mesh (0 to {m - 1})")
     get = {name: cells[name][element] for name in cells}
     patterns = legend["patterns"]
-    lines = [f"element {element} (0-based): target size h = {get['h_target']:.6g} at its centroid, "
-             f"actual mean edge length {get['h_actual']:.6g} (ratio {get['size_ratio']:.3f})"]
+    lines = [
+        f"element {element} (0-based): target size h = {get['h_target']:.6g} at its centroid, "
+        f"actual mean edge length {get['h_actual']:.6g} (ratio {get['size_ratio']:.3f})"
+    ]
     winner = int(get["winner"])
     if winner >= 0:
         p = patterns[winner]
         zone = legend["zones"][int(get["zone"])]
         placement = legend["placements"][p["placement_index"]]
-        lines.append(f"winner: {p['id']} (pattern '{p['pattern']}') with membership mu = {get['winner_mu']:.4f}"
-                     + (f" on {p['feature']}" if p.get("feature") else ""))
+        lines.append(
+            f"winner: {p['id']} (pattern '{p['pattern']}') with membership mu = {get['winner_mu']:.4f}"
+            + (f" on {p['feature']}" if p.get("feature") else "")
+        )
         lines.append(f"  placed by {placement['origin']} ({placement['id']}) at {placement['source']}")
         lines.append(f"  its zone '{zone['id']}' ({zone['law']} law, {zone['source']}) set the raw size")
         runner = int(get["runner_up"])
-        lines.append(f"runner-up: {patterns[runner]['id']} with mu = {get['runner_up_mu']:.4f}: it loses, "
-                     "the highest membership wins" if runner >= 0 else "no other pattern reaches this element")
+        lines.append(
+            f"runner-up: {patterns[runner]['id']} with mu = {get['runner_up_mu']:.4f}: it loses, "
+            "the highest membership wins"
+            if runner >= 0
+            else "no other pattern reaches this element"
+        )
     else:
         lines.append(f"no pattern reaches here: the global size H = {legend['global_size']:.6g} applies")
     if get["graded"]:
-        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} lowered the size by "
-                     f"{get['gradation']:.6g} (a smaller size nearby)")
+        lines.append(
+            f"the gradation limit g = {legend['gradation_limit']:g} lowered the size by "
+            f"{get['gradation']:.6g} (a smaller size nearby)"
+        )
     else:
-        lines.append(f"the gradation limit g = {legend['gradation_limit']:g} is not active here (it lowers the size "
-                     f"by {get['gradation']:.3g}, not more than {100 * GRADED_THRESHOLD:g} %)"
-                     if get["gradation"] > 0 else
-                     f"the gradation limit g = {legend['gradation_limit']:g} is not active here")
+        lines.append(
+            f"the gradation limit g = {legend['gradation_limit']:g} is not active here (it lowers the size "
+            f"by {get['gradation']:.3g}, not more than {100 * GRADED_THRESHOLD:g} %)"
+            if get["gradation"] > 0
+            else f"the gradation limit g = {legend['gradation_limit']:g} is not active here"
+        )
     return "\n".join(lines)
 
 
@@ -212,19 +299,24 @@ def explain_node(nodes: dict, legend: dict, points: np.ndarray, node: int) -> st
     mine = [i for i, b in enumerate(events.get("bubble", [])) if b == bubble] if bubble >= 0 else []
     for i in mine:
         rule = legend["rules"][events["rule"][i]]
-        lines.append(f"  {events['action'][i].rstrip('e')}ed at iteration {events['iteration'][i]} of the "
-                     f"{events['level'][i]} level by rule {rule['id']} ({rule['source'] or 'source unknown'}), firing degree "
-                     f"{events['firing'][i]:.4f}")
+        lines.append(
+            f"  {events['action'][i].rstrip('e')}ed at iteration {events['iteration'][i]} of the "
+            f"{events['level'][i]} level by rule {rule['id']} ({rule['source'] or 'source unknown'}), firing degree "
+            f"{events['firing'][i]:.4f}"
+        )
     if bubble >= 0 and not mine:
-        lines.append(f"  an initial bubble of the {name} level: placed at the level's start and kept by the "
-                     "population rules" if name != "corner" else "  corners are fixed: no population control")
+        lines.append(
+            f"  an initial bubble of the {name} level: placed at the level's start and kept by the population rules"
+            if name != "corner"
+            else "  corners are fixed: no population control"
+        )
     return "\n".join(lines)
 
 
 def element_at(points: np.ndarray, tets: np.ndarray, point: np.ndarray) -> int:
     """The first tet (0-based) that contains ``point``, -1 if none."""
     a, b, c, d = (points[tets[:, i]] for i in range(4))
-    matrix = np.stack([b - a, c - a, d - a], axis=2)              # (m, 3, 3)
+    matrix = np.stack([b - a, c - a, d - a], axis=2)  # (m, 3, 3)
     weights = np.linalg.solve(matrix, (point - a)[:, :, None])[:, :, 0]
     tolerance = 1e-9
     inside = (weights >= -tolerance).all(axis=1) & (weights.sum(axis=1) <= 1 + tolerance)

@@ -5,6 +5,7 @@ any job key or shape parameter, and ``files`` (a folder or glob of geometry file
 job with its own output folder, meshed by ``engine.pipeline.run`` in a Dask task. The study writes one row per
 variant to ``study.csv`` and ``study.parquet`` and plots quality and element count in ``study.html``.
 """
+
 from __future__ import annotations
 
 import base64
@@ -37,10 +38,20 @@ from .yamlfile import Located, load_yaml
 log = logging.getLogger("fuzzymesh")
 
 GEOMETRY_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".step", ".stp", ".iges", ".igs", ".brep")
-MARKER = "variant.json"          # a variant's row and job hash, written after its mesh files: the outputs are complete
+MARKER = "variant.json"  # a variant's row and job hash, written after its mesh files: the outputs are complete
 EXTRA = ("distributed", "pyarrow")
-FIGURES = ("tetrahedra", "nodes", "bubbles", "min_dihedral", "dihedral_p01", "radius_ratio_min", "below_10deg",
-           "volume_error_pct", "conformity_median", "conformity_within")
+FIGURES = (
+    "tetrahedra",
+    "nodes",
+    "bubbles",
+    "min_dihedral",
+    "dihedral_p01",
+    "radius_ratio_min",
+    "below_10deg",
+    "volume_error_pct",
+    "conformity_median",
+    "conformity_within",
+)
 TAIL = ("time_total", "peak_memory_mb", "worker", "directory", "files", "cached", "job_hash")
 
 
@@ -48,19 +59,32 @@ def study_schema() -> dict:
     values = "a list of values, or a range {from, to, step} or {from, to, count}"
     return {
         "job": Field(STRING, required=True, doc="the base job file, relative to the study file"),
-        "cross": Field(MAPPING, open_keys=True, doc=f"KEY: values, every combination; KEY a job key (dotted: "
-                                                    f"output.order) or a shape parameter; {values}"),
+        "cross": Field(
+            MAPPING,
+            open_keys=True,
+            doc=f"KEY: values, every combination; KEY a job key (dotted: output.order) or a shape parameter; {values}",
+        ),
         "zip": Field(MAPPING, open_keys=True, doc=f"KEY: values, all of one length, varied together; {values}"),
         "files": Field(STRING, doc="a folder or glob of geometry files, relative to the study file"),
-        "output": Field(MAPPING, default=None, doc="where the study writes", fields={
-            "directory": Field(STRING, default="study", doc="the study's folder, relative to the study file")}),
+        "output": Field(
+            MAPPING,
+            default=None,
+            doc="where the study writes",
+            fields={"directory": Field(STRING, default="study", doc="the study's folder, relative to the study file")},
+        ),
     }
 
 
-RANGE = {"from": Field(NUMBER, required=True, doc="first value"), "to": Field(NUMBER, required=True, doc="last value"),
-         "step": Field(NUMBER, check=positive, doc="difference between values"),
-         "count": Field(INTEGER, check=lambda n: None if n >= 2 else f"must be at least 2, got {n}",
-                        doc="number of values, evenly spaced")}
+RANGE = {
+    "from": Field(NUMBER, required=True, doc="first value"),
+    "to": Field(NUMBER, required=True, doc="last value"),
+    "step": Field(NUMBER, check=positive, doc="difference between values"),
+    "count": Field(
+        INTEGER,
+        check=lambda n: None if n >= 2 else f"must be at least 2, got {n}",
+        doc="number of values, evenly spaced",
+    ),
+}
 
 
 @dataclass(frozen=True)
@@ -96,13 +120,19 @@ def _values(raw, name: str, where: str) -> list:
             raise JobError(f"'{name}' has no values", where=where, fix="give at least one value")
         return raw
     if not isinstance(raw, dict):
-        raise JobError(f"'{name}' must be a list or a range mapping", where=where,
-                       fix="e.g. [10, 20] or {from: 10, to: 20, step: 5}")
+        raise JobError(
+            f"'{name}' must be a list or a range mapping",
+            where=where,
+            fix="e.g. [10, 20] or {from: 10, to: 20, step: 5}",
+        )
     spec = validate(raw, RANGE, JobError, name, where)
     first, last, step, count = spec["from"], spec["to"], spec["step"], spec["count"]
     if (step is None) == (count is None) or last < first:
-        raise JobError(f"the range '{name}' needs 'from' <= 'to' and exactly one of 'step' or 'count'", where=where,
-                       fix="e.g. {from: 10, to: 20, step: 5}")
+        raise JobError(
+            f"the range '{name}' needs 'from' <= 'to' and exactly one of 'step' or 'count'",
+            where=where,
+            fix="e.g. {from: 10, to: 20, step: 5}",
+        )
     if count is None:
         count = int(math.floor((last - first) / step + 1e-9)) + 1
         return [first + i * step for i in range(count)]
@@ -124,10 +154,13 @@ def _key_field(key: str, shape: str | None, where: str) -> tuple[tuple, Field]:
             break
         fields = field.fields
     if field is None or path in (("output",), ("output", "directory")):
-        raise JobError(f"'{key}' is neither a job key nor a parameter of the shape '{shape}'", where=where,
-                       fix=f"vary a job key ({', '.join(k for k in job_schema() if k != 'output')}, dotted ones "
-                           f"such as output.order) or a shape parameter ({', '.join(shape_fields) or 'none'}); "
-                           f"the study sets output.directory")
+        raise JobError(
+            f"'{key}' is neither a job key nor a parameter of the shape '{shape}'",
+            where=where,
+            fix=f"vary a job key ({', '.join(k for k in job_schema() if k != 'output')}, dotted ones "
+            f"such as output.order) or a shape parameter ({', '.join(shape_fields) or 'none'}); "
+            f"the study sets output.directory",
+        )
     return path, field
 
 
@@ -146,8 +179,11 @@ def _axes(block, name: str, shape: str | None) -> list[list[tuple]]:
         return [[(setting,) for setting in column] for column in columns]
     lengths = {len(c) for c in columns}
     if len(lengths) > 1:
-        raise JobError(f"the lists of 'zip' have different lengths ({', '.join(map(str, sorted(lengths)))})",
-                       where=block.where(), fix="give every key of 'zip' as many values")
+        raise JobError(
+            f"the lists of 'zip' have different lengths ({', '.join(map(str, sorted(lengths)))})",
+            where=block.where(),
+            fix="give every key of 'zip' as many values",
+        )
     return [list(zip(*columns))] if columns else []
 
 
@@ -156,8 +192,11 @@ def _files(pattern: str, base: Path, where: str) -> list[Path]:
     found = sorted(folder.iterdir()) if folder.is_dir() else sorted(map(Path, glob.glob(str(base / pattern))))
     found = [p for p in found if p.is_file() and p.suffix.lower() in GEOMETRY_SUFFIXES]
     if not found:
-        raise JobError(f"'files: {pattern}' names no geometry file", where=where,
-                       fix=f"give a folder or glob of {', '.join(GEOMETRY_SUFFIXES)} files")
+        raise JobError(
+            f"'files: {pattern}' names no geometry file",
+            where=where,
+            fix=f"give a folder or glob of {', '.join(GEOMETRY_SUFFIXES)} files",
+        )
     return found
 
 
@@ -201,13 +240,17 @@ def load_study(path: str | Path) -> Study:
     spec = validate(data, study_schema(), JobError)
     job_path = path.parent / spec["job"]
     raw = load_yaml(job_path, JobError)
-    job_from_dict(raw, base_dir=job_path.parent, source=str(job_path))    # the base job itself is valid
+    job_from_dict(raw, base_dir=job_path.parent, source=str(job_path))  # the base job itself is valid
     base = _plain(raw)
     shape = None if spec["files"] else base.get("geometry", {}).get("shape")
     axes = _axes(data.get("cross"), "cross", shape) + _axes(data.get("zip"), "zip", shape)
     if spec["files"]:
-        axes.append([(("file", ("geometry", "file"), str(f.resolve())),) for f in
-                     _files(spec["files"], path.parent, data.where("files"))])
+        axes.append(
+            [
+                (("file", ("geometry", "file"), str(f.resolve())),)
+                for f in _files(spec["files"], path.parent, data.where("files"))
+            ]
+        )
     if not axes:
         raise JobError("the study varies nothing", where=data.where(), fix="add 'cross', 'zip' or 'files'")
     directory = path.parent / (spec["output"] or {"directory": "study"})["directory"]
@@ -221,20 +264,32 @@ def load_study(path: str | Path) -> Study:
             job["geometry"] = {k: v for k, v in job["geometry"].items() if k not in ("shape", "parameters")}
         for _, key_path, value in settings:
             _set(job, key_path, value)
-        name = "_".join(_slug(Path(v).name) if k == "file" else f"{_slug(k.split('.')[-1])}-{_slug(v)}" for k, _, v in settings)
+        name = "_".join(
+            _slug(Path(v).name) if k == "file" else f"{_slug(k.split('.')[-1])}-{_slug(v)}" for k, _, v in settings
+        )
         folder = (directory / "variants" / name).resolve()
         _set(job, ("output", "directory"), str(folder))
         try:
             job_from_dict(job, base_dir=job_path.parent, source=f"{job_path} [{name}]")
         except JobError as error:
             raise JobError(f"variant '{name}': {error.what}", where=data.where(), fix=error.fix) from None
-        variants.append(Variant(name, {k: v for k, _, v in settings}, job, str(job_path.parent.resolve()),
-                                f"{job_path} [{name}]", str(folder), _digest(job, job_path.parent, knowledge)))
+        variants.append(
+            Variant(
+                name,
+                {k: v for k, _, v in settings},
+                job,
+                str(job_path.parent.resolve()),
+                f"{job_path} [{name}]",
+                str(folder),
+                _digest(job, job_path.parent, knowledge),
+            )
+        )
     names = [v.name for v in variants]
     if len(set(names)) < len(names):
         twice = sorted({n for n in names if names.count(n) > 1})
-        raise JobError(f"the study makes the variant '{twice[0]}' more than once", where=data.where(),
-                       fix="give every value once")
+        raise JobError(
+            f"the study makes the variant '{twice[0]}' more than once", where=data.where(), fix="give every value once"
+        )
     return Study(path, keys, variants, directory)
 
 
@@ -266,8 +321,13 @@ def mesh_variant(variant: Variant) -> dict:
     logging.getLogger("fuzzymesh").setLevel(logging.WARNING)
     _reset_peak()
     start = time.perf_counter()
-    row = {"variant": variant.name, **variant.parameters, "worker": f"{socket.gethostname()}:{os.getpid()}",
-           "directory": variant.directory, "job_hash": variant.digest}
+    row = {
+        "variant": variant.name,
+        **variant.parameters,
+        "worker": f"{socket.gethostname()}:{os.getpid()}",
+        "directory": variant.directory,
+        "job_hash": variant.digest,
+    }
     try:
         result = run(variant.load())
     except MeshRejected as error:
@@ -275,16 +335,27 @@ def mesh_variant(variant: Variant) -> dict:
     except FuzzymeshError as error:
         return {**row, "status": "refused", "message": error.one_line()}
     quality, conformity = result.quality, result.conformity
-    row.update({
-        "status": "ok", "message": "", "tetrahedra": len(result.mesh.tets), "nodes": len(result.mesh.points),
-        "bubbles": len(result.packing), "min_dihedral": quality["min_dihedral"]["min"],
-        "dihedral_p01": quality["min_dihedral"]["p01"], "radius_ratio_min": quality["radius_ratio"]["min"],
-        "below_10deg": quality["below"]["min_dihedral_10"],
-        "volume_error_pct": 100 * (result.mesh.volume / result.geometry.volume - 1),
-        "conformity_median": conformity["median"], "conformity_within": conformity["within"],
-        **{f"time_{stage}": seconds for stage, seconds in result.timings.items()},
-        "time_total": time.perf_counter() - start, "peak_memory_mb": _peak_mb(),
-        "files": " ".join(p.name for p in result.files), "cached": False})
+    row.update(
+        {
+            "status": "ok",
+            "message": "",
+            "tetrahedra": len(result.mesh.tets),
+            "nodes": len(result.mesh.points),
+            "bubbles": len(result.packing),
+            "min_dihedral": quality["min_dihedral"]["min"],
+            "dihedral_p01": quality["min_dihedral"]["p01"],
+            "radius_ratio_min": quality["radius_ratio"]["min"],
+            "below_10deg": quality["below"]["min_dihedral_10"],
+            "volume_error_pct": 100 * (result.mesh.volume / result.geometry.volume - 1),
+            "conformity_median": conformity["median"],
+            "conformity_within": conformity["within"],
+            **{f"time_{stage}": seconds for stage, seconds in result.timings.items()},
+            "time_total": time.perf_counter() - start,
+            "peak_memory_mb": _peak_mb(),
+            "files": " ".join(p.name for p in result.files),
+            "cached": False,
+        }
+    )
     marker = Path(variant.directory) / MARKER
     write_all_or_nothing([(marker, lambda tmp: Path(tmp).write_text(json.dumps({"hash": variant.digest, "row": row})))])
     return row
@@ -298,7 +369,8 @@ def cached_row(variant: Variant) -> dict | None:
         return None
     row = saved.get("row", {})
     complete = saved.get("hash") == variant.digest and all(
-        (Path(variant.directory) / name).is_file() for name in row.get("files", "").split())
+        (Path(variant.directory) / name).is_file() for name in row.get("files", "").split()
+    )
     return {**row, "cached": True} if complete and row.get("files") else None
 
 
@@ -308,8 +380,10 @@ def require_batch() -> None:
 
     missing = [m for m in EXTRA if importlib.util.find_spec(m) is None]
     if missing:
-        raise FuzzymeshError(f"batch meshing needs {' and '.join(missing)} (the optional 'batch' extra), not "
-                             "installed", fix="pip install 'fuzzymesh[batch]'")
+        raise FuzzymeshError(
+            f"batch meshing needs {' and '.join(missing)} (the optional 'batch' extra), not installed",
+            fix="pip install 'fuzzymesh[batch]'",
+        )
 
 
 @contextmanager
@@ -325,7 +399,7 @@ def dask_client(scheduler: str | None = None, workers: int | None = None):
             _import_on_main_thread(client)
             yield client
         return
-    logging.getLogger("distributed").setLevel(logging.WARNING)    # the embedded cluster's start and stop
+    logging.getLogger("distributed").setLevel(logging.WARNING)  # the embedded cluster's start and stop
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True) as cluster, Client(cluster) as client:
         _import_on_main_thread(client)
         yield client
@@ -338,8 +412,9 @@ def _import_on_main_thread(client) -> None:
 
     class MainThreadImports(WorkerPlugin):
         def setup(self, worker):
-            from . import _numba  # noqa: F401  (OpenMP's settings before pymeshlab starts it)
             import pymeshlab  # noqa: F401
+
+            from . import _numba  # noqa: F401  (OpenMP's settings before pymeshlab starts it)
 
     client.register_plugin(MainThreadImports(), name="fuzzymesh-main-thread-imports")
 
@@ -351,8 +426,9 @@ def run_variants(study: Study, client, retries: int = 0) -> list[dict]:
     from .progress import progress
 
     rows = {v.name: row for v in study.variants if (row := cached_row(v)) is not None}
-    futures = {client.submit(mesh_variant, v, pure=False, retries=retries): v
-               for v in study.variants if v.name not in rows}
+    futures = {
+        client.submit(mesh_variant, v, pure=False, retries=retries): v for v in study.variants if v.name not in rows
+    }
     try:
         with progress(len(study.variants), "variants") as bar:
             bar.update(len(rows))
@@ -370,8 +446,14 @@ def run_variants(study: Study, client, retries: int = 0) -> list[dict]:
 def failed_row(variant: Variant, future) -> dict:
     error = future.exception()
     message = " ".join(f"{error.__class__.__name__}: {error}".split())
-    return {"variant": variant.name, **variant.parameters, "status": "failed", "message": message,
-            "directory": variant.directory, "job_hash": variant.digest}
+    return {
+        "variant": variant.name,
+        **variant.parameters,
+        "status": "failed",
+        "message": message,
+        "directory": variant.directory,
+        "job_hash": variant.digest,
+    }
 
 
 def remove_partial_files(study: Study) -> None:
@@ -426,18 +508,33 @@ def _cell(value) -> str:
 
 def study_page(study: Study, rows: list[dict]) -> str:
     """The study's HTML page: counts by status, the plots, the table."""
-    shown = ["variant", "status", *study.keys, "tetrahedra", "min_dihedral", "conformity_within", "time_total",
-             "peak_memory_mb", "message"]
+    shown = [
+        "variant",
+        "status",
+        *study.keys,
+        "tetrahedra",
+        "min_dihedral",
+        "conformity_within",
+        "time_total",
+        "peak_memory_mb",
+        "message",
+    ]
     counts = ", ".join(f"{sum(r['status'] == s for r in rows)} {s}" for s in ("ok", "refused", "rejected", "failed"))
     head = "".join(f"<th>{html.escape(c)}</th>" for c in shown)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_cell(Path(r.get(c)).name if c == 'file' else r.get(c)))}</td>"
-                                    for c in shown) + "</tr>" for r in rows)
+    body = "".join(
+        "<tr>"
+        + "".join(f"<td>{html.escape(_cell(Path(r.get(c)).name if c == 'file' else r.get(c)))}</td>" for c in shown)
+        + "</tr>"
+        for r in rows
+    )
     images = "".join(f'<p><img src="{uri}"></p>' for uri in _plots(study, rows))
-    return (f"<!doctype html><html><head><meta charset='utf-8'><title>study {html.escape(study.source.name)}</title>"
-            "<style>body{font-family:sans-serif}td,th{padding:2px 8px;border-bottom:1px solid #ddd;"
-            "text-align:left}</style></head><body>"
-            f"<h1>study {html.escape(str(study.source))}</h1><p>{len(rows)} variants: {counts}</p>{images}"
-            f"<table><tr>{head}</tr>{body}</table></body></html>")
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>study {html.escape(study.source.name)}</title>"
+        "<style>body{font-family:sans-serif}td,th{padding:2px 8px;border-bottom:1px solid #ddd;"
+        "text-align:left}</style></head><body>"
+        f"<h1>study {html.escape(str(study.source))}</h1><p>{len(rows)} variants: {counts}</p>{images}"
+        f"<table><tr>{head}</tr>{body}</table></body></html>"
+    )
 
 
 def write_study(study: Study, rows: list[dict]) -> list[Path]:
@@ -454,15 +551,18 @@ def write_study(study: Study, rows: list[dict]) -> list[Path]:
             writer.writeheader()
             writer.writerows(table)
 
-    return write_all_or_nothing([
-        (study.directory / "study.csv", write_csv),
-        (study.directory / "study.parquet", lambda tmp: pq.write_table(pa.Table.from_pylist(table), tmp)),
-        (study.directory / "study.html", lambda tmp: Path(tmp).write_text(study_page(study, rows))),
-    ])
+    return write_all_or_nothing(
+        [
+            (study.directory / "study.csv", write_csv),
+            (study.directory / "study.parquet", lambda tmp: pq.write_table(pa.Table.from_pylist(table), tmp)),
+            (study.directory / "study.html", lambda tmp: Path(tmp).write_text(study_page(study, rows))),
+        ]
+    )
 
 
-def batch(path: str | Path, scheduler: str | None = None, workers: int | None = None,
-          retries: int = 0) -> tuple[list[dict], list[Path]]:
+def batch(
+    path: str | Path, scheduler: str | None = None, workers: int | None = None, retries: int = 0
+) -> tuple[list[dict], list[Path]]:
     """Load a study, mesh its variants on Dask, write its table and page: (rows, files). Interrupted (Ctrl-C),
     an embedded cluster's killed tasks leave no partial files and the study writes nothing."""
     import dask

@@ -13,6 +13,7 @@ shipped tests with the CAD's axis and radius), and each an exact surface or curv
 cylinders, cones, spheres and tori, else the CAD entity's closest point) onto which :mod:`engine.exact`
 moves the mesh nodes and 10-node mid-edge nodes.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -35,12 +36,12 @@ from .geometry import Geometry, validate_surface
 log = logging.getLogger(__name__)
 
 CAD_FORMATS = (".step", ".stp", ".iges", ".igs", ".brep")
-TURN_ANGLE = 10.0        # tessellation: degrees of turn per facet of a curved face
-DEFLECTION = 1e-3        # tessellation: largest sagitta, x the model size
-MESHER_SIZE = 40         # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
-HEAL_TOLERANCE = 1e-6    # x the model size: faces of a file without solids are sewn across gaps this wide
-SAME_SURFACE = 1e-6      # x the model size: two faces' parameters closer than this describe one surface
-NARROW = 1.0             # a cone narrower along its slant than this x its mean radius is a chamfer
+TURN_ANGLE = 10.0  # tessellation: degrees of turn per facet of a curved face
+DEFLECTION = 1e-3  # tessellation: largest sagitta, x the model size
+MESHER_SIZE = 40  # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
+HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are sewn across gaps this wide
+SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
+NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ class CadModel:
         import gmsh
 
         if not gmsh.isInitialized():
-            gmsh.initialize(["-noenv"], readConfigFiles=False, interruptible=False)   # see tetra.gmsh_session
+            gmsh.initialize(["-noenv"], readConfigFiles=False, interruptible=False)  # see tetra.gmsh_session
             gmsh.option.setNumber("General.Terminal", 0)
         previous = gmsh.model.getCurrent()
         if self.name in gmsh.model.list():
@@ -76,8 +77,9 @@ class CadModel:
         if len(points) == 0:
             return points.copy()
         with self.current() as model:
-            candidates = np.stack([np.reshape(model.getClosestPoint(dim, tag, points.ravel())[0], (-1, 3))
-                                   for tag in tags])
+            candidates = np.stack(
+                [np.reshape(model.getClosestPoint(dim, tag, points.ravel())[0], (-1, 3)) for tag in tags]
+            )
         best = np.argmin(np.linalg.norm(candidates - points, axis=2), axis=0)
         return candidates[best, np.arange(len(points))]
 
@@ -100,19 +102,28 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
     path = Path(path)
     source = str(path)
     if path.suffix.lower() not in CAD_FORMATS:
-        raise GeometryError(f"unknown CAD format '{path.suffix or '(none)'}'", where=source,
-                            fix=f"give one of: {', '.join(CAD_FORMATS)}")
+        raise GeometryError(
+            f"unknown CAD format '{path.suffix or '(none)'}'",
+            where=source,
+            fix=f"give one of: {', '.join(CAD_FORMATS)}",
+        )
     if not path.is_file():
         raise GeometryError("file not found", where=source, fix="check the path")
     model = CadModel(str(path.resolve()), f"fuzzymesh-cad:{path.resolve()}")
     with model.current() as gm:
         solids = gm.getEntities(3)
         if not solids:
-            raise GeometryError("the file holds no solid (and its faces could not be sewn into one)", where=source,
-                                fix="export the part as a solid body")
+            raise GeometryError(
+                "the file holds no solid (and its faces could not be sewn into one)",
+                where=source,
+                fix="export the part as a solid body",
+            )
         if len(solids) > 1 and not allow_multiple_solids:
-            raise GeometryError(f"the file holds {len(solids)} solids", where=source, fix="mesh them one at a time, "
-                                "or set 'allow_multiple_solids: true' in the job's geometry")
+            raise GeometryError(
+                f"the file holds {len(solids)} solids",
+                where=source,
+                fix="mesh them one at a time, or set 'allow_multiple_solids: true' in the job's geometry",
+            )
         faces = np.array([tag for _, tag in gm.getEntities(2)])
         surfaces = [_surface(gm.getType(2, tag), gm.getEntityProperties(2, tag)[1]) for tag in faces]
         face_names = [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces]
@@ -121,28 +132,38 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         edge_faces = [np.searchsorted(faces, gm.getAdjacencies(1, tag)[0]).tolist() for tag in edges]
         shared = [tag for tag in faces if len(gm.getAdjacencies(2, tag)[0]) > 1]
         if shared:
-            raise GeometryError(f"solids of the file touch (they share face-{shared[0]} and {len(shared) - 1} more): "
-                                "a conforming interface between solids is not supported yet", where=source,
-                                fix="fuse them into one solid in the CAD tool, or mesh them one at a time")
+            raise GeometryError(
+                f"solids of the file touch (they share face-{shared[0]} and {len(shared) - 1} more): "
+                "a conforming interface between solids is not supported yet",
+                where=source,
+                fix="fuse them into one solid in the CAD tool, or mesh them one at a time",
+            )
     for mesher in (False, True):
         with model.current() as gm:
             vertices, triangles, face_tag = _tessellate(gm, mesher)
-        face = np.searchsorted(faces, face_tag)                     # per triangle, index into faces
+        face = np.searchsorted(faces, face_tag)  # per triangle, index into faces
         try:
-            geometry = validate_surface(vertices, _oriented(vertices, triangles, face), source,
-                                        allow_multiple_solids=allow_multiple_solids)
+            geometry = validate_surface(
+                vertices, _oriented(vertices, triangles, face), source, allow_multiple_solids=allow_multiple_solids
+            )
             break
         except GeometryError as error:
             if mesher:
                 raise
-            log.warning("%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
-                        "instead, where cylinders and cones are not recognised from the facets", source, error.what)
+            log.warning(
+                "%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
+                "instead, where cylinders and cones are not recognised from the facets",
+                source,
+                error.what,
+            )
     if len(geometry.faces) != len(face):
-        raise GeometryError("the CAD faces' tessellation has degenerate triangles", where=source,
-                            fix="heal the model in the CAD tool")
+        raise GeometryError(
+            "the CAD faces' tessellation has degenerate triangles", where=source, fix="heal the model in the CAD tool"
+        )
     group = _groups(surfaces, edge_faces, geometry.scale)
-    features = detect_features(geometry, feature_angle,
-                               [lambda _, g=g: group[face] == g for g in range(1, group.max() + 1)])
+    features = detect_features(
+        geometry, feature_angle, [lambda _, g=g: group[face] == g for g in range(1, group.max() + 1)]
+    )
     patch_faces = [np.flatnonzero(group == group[face[p.faces[0]]]) for p in features.patches]
     for patch, members in zip(features.patches, patch_faces):
         patch.names = [face_names[k] for k in members]
@@ -152,9 +173,12 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
     for curve, members in zip(features.curves, curve_edges):
         curve.names = [edge_names[k] for k in members]
     exact_patches = [surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces]
-    exact_curves = [CadEntity(model, 1, tuple(edges[m].tolist())) if len(m) else
-                    CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
-                    for curve, m in zip(features.curves, curve_edges)]
+    exact_curves = [
+        CadEntity(model, 1, tuple(edges[m].tolist()))
+        if len(m)
+        else CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
+        for curve, m in zip(features.curves, curve_edges)
+    ]
     features.exact = (exact_patches, exact_curves)
     return geometry, features
 
@@ -169,12 +193,15 @@ def _build(path: str) -> None:
     gmsh.option.setString("Geometry.OCCTargetUnit", "MM" if Path(path).suffix.lower() in (".step", ".stp") else "")
     try:
         shapes = occ.importShapes(path)
-    except Exception as exc:   # Gmsh raises a bare Exception with its last error
-        raise GeometryError(f"not a readable CAD file ({exc})", where=path,
-                            fix="check that the file is a valid STEP, IGES or BREP model") from None
+    except Exception as exc:  # Gmsh raises a bare Exception with its last error
+        raise GeometryError(
+            f"not a readable CAD file ({exc})",
+            where=path,
+            fix="check that the file is a valid STEP, IGES or BREP model",
+        ) from None
     finally:
         gmsh.option.setString("Geometry.OCCTargetUnit", previous)
-    if not any(dim == 3 for dim, _ in shapes):   # all entities: given the imported faces, OpenCASCADE makes no solid
+    if not any(dim == 3 for dim, _ in shapes):  # all entities: given the imported faces, OpenCASCADE makes no solid
         occ.synchronize()
         lo, hi = np.reshape(gmsh.model.getBoundingBox(-1, -1), (2, 3))
         occ.healShapes(tolerance=HEAL_TOLERANCE * float(np.linalg.norm(hi - lo)))
@@ -207,7 +234,7 @@ def _surface(kind: str, parameters) -> Surface:
         exact = Plane(-p[3] * normal / np.linalg.norm(p[:3]), normal)
     elif kind == "Cylinder" and len(p) == 7:
         exact = CylinderSurface(p[:3], _unit(p[3:6]), p[6])
-    elif kind == "Cone" and len(p) == 8:    # OCC: radius p[6] at p[:3], growing along the axis by semi-angle p[7]
+    elif kind == "Cone" and len(p) == 8:  # OCC: radius p[6] at p[:3], growing along the axis by semi-angle p[7]
         axis = _unit(p[3:6]) * np.sign(p[7])
         exact = Cone(p[:3] - axis * p[6] / np.tan(abs(p[7])), axis, abs(float(p[7])))
     elif kind == "Sphere" and len(p) == 4:
@@ -246,34 +273,53 @@ def _tessellate(gm, mesher: bool = False):
     lo, hi = np.reshape(gm.getBoundingBox(-1, -1), (2, 3))
     diagonal = float(np.linalg.norm(hi - lo))
     if mesher:
-        with _options({"Mesh.MeshSizeFromCurvature": 360 / TURN_ANGLE, "Mesh.MeshSizeMax": diagonal / MESHER_SIZE,
-                       "Mesh.MeshSizeMin": 0, "Mesh.Algorithm": 6}):
+        with _options(
+            {
+                "Mesh.MeshSizeFromCurvature": 360 / TURN_ANGLE,
+                "Mesh.MeshSizeMax": diagonal / MESHER_SIZE,
+                "Mesh.MeshSizeMin": 0,
+                "Mesh.Algorithm": 6,
+            }
+        ):
             gm.mesh.clear()
             gm.mesh.generate(2)
         tags, xyz, _ = gm.mesh.getNodes()
         xyz = xyz.reshape(-1, 3)[np.argsort(tags)]
         blocks = [(tag, gm.mesh.getElements(2, tag)) for _, tag in gm.getEntities(2)]
-        blocks = [(tag, xyz[np.searchsorted(np.sort(tags), nodes[list(types).index(2)].reshape(-1, 3))])
-                  for tag, (types, _, nodes) in blocks]
+        blocks = [
+            (tag, xyz[np.searchsorted(np.sort(tags), nodes[list(types).index(2)].reshape(-1, 3))])
+            for tag, (types, _, nodes) in blocks
+        ]
         gm.mesh.clear()
     else:
         for name in {gm.getEntityName(2, tag) for _, tag in gm.getEntities(2)} - {""}:
-            gm.removeEntityName(name)   # the STL names each face's solid by its name, if any, else by its tag
-        with tempfile.TemporaryDirectory() as folder, _options({
-                "Mesh.Binary": 0, "Mesh.StlOneSolidPerSurface": 1, "Mesh.StlLinearDeflectionRelative": 0,
-                "Mesh.StlLinearDeflection": DEFLECTION * diagonal, "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE)}):
+            gm.removeEntityName(name)  # the STL names each face's solid by its name, if any, else by its tag
+        with (
+            tempfile.TemporaryDirectory() as folder,
+            _options(
+                {
+                    "Mesh.Binary": 0,
+                    "Mesh.StlOneSolidPerSurface": 1,
+                    "Mesh.StlLinearDeflectionRelative": 0,
+                    "Mesh.StlLinearDeflection": DEFLECTION * diagonal,
+                    "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE),
+                }
+            ),
+        ):
             gm.mesh.clear()
             gmsh.write(str(Path(folder) / "faces.stl"))
             text = (Path(folder) / "faces.stl").read_text()
-        blocks = [(int(tag), np.array(re.findall(r"vertex\s+(\S+)\s+(\S+)\s+(\S+)", body), float).reshape(-1, 3, 3))
-                  for tag, body in re.findall(r"solid Gmsh Surface (\d+)(.*?)endsolid", text, re.S)]
+        blocks = [
+            (int(tag), np.array(re.findall(r"vertex\s+(\S+)\s+(\S+)\s+(\S+)", body), float).reshape(-1, 3, 3))
+            for tag, body in re.findall(r"solid Gmsh Surface (\d+)(.*?)endsolid", text, re.S)
+        ]
     face_tag = np.repeat([tag for tag, _ in blocks], [len(c) for _, c in blocks])
     corners = np.concatenate([c for _, c in blocks])
     vertices, index = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
     triangles = index.reshape(-1, 3)
     double_area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    kept = double_area > 2e-12 * diagonal * longest          # validate_surface's test: height above 1e-12 x size
+    kept = double_area > 2e-12 * diagonal * longest  # validate_surface's test: height above 1e-12 x size
     return vertices, triangles[kept], face_tag[kept]
 
 
@@ -286,24 +332,30 @@ def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> 
     key = np.sort(directed, axis=1)
     order = np.lexsort((key[:, 1], key[:, 0]))
     if len(order) % 2 or (key[order[0::2]] != key[order[1::2]]).any():
-        raise GeometryError("the CAD faces' tessellation is not closed", where="the CAD model",
-                            fix="heal the model in the CAD tool (open shells or non-manifold edges)")
+        raise GeometryError(
+            "the CAD faces' tessellation is not closed",
+            where="the CAD model",
+            fix="heal the model in the CAD tool (open shells or non-manifold edges)",
+        )
     first, second = order[0::2], order[1::2]
     a, b = np.repeat(face, 3)[first], np.repeat(face, 3)[second]
-    flip_pair = directed[first, 0] == directed[second, 0]       # walked the same way: one of the two flips
+    flip_pair = directed[first, 0] == directed[second, 0]  # walked the same way: one of the two flips
     rows = np.unique(np.column_stack([a, b, flip_pair])[a != b], axis=0)
     graph = sparse.coo_matrix((rows[:, 2] + 1, (rows[:, 0], rows[:, 1])), shape=(n, n)).tocsr()
-    graph = graph.maximum(graph.T)                              # weight 1: same way round, 2: opposite
+    graph = graph.maximum(graph.T)  # weight 1: same way round, 2: opposite
     shells = csgraph.connected_components(graph, directed=False)[1]
     flip = np.zeros(n, bool)
     for root in np.unique(shells, return_index=True)[1]:
         nodes, parents = csgraph.breadth_first_order(graph, root, directed=False)
-        for node in nodes[1:]:                                  # parents come first in breadth-first order
+        for node in nodes[1:]:  # parents come first in breadth-first order
             flip[node] = flip[parents[node]] ^ (graph[parents[node], node] == 2)
     out = np.where(flip[face][:, None], triangles[:, ::-1], triangles)
     corners = vertices[out]
-    volume = np.bincount(shells[face], np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])),
-                         minlength=shells.max() + 1)
+    volume = np.bincount(
+        shells[face],
+        np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])),
+        minlength=shells.max() + 1,
+    )
     return np.where((volume[shells[face]] < 0)[:, None], out[:, ::-1], out)
 
 
@@ -311,9 +363,12 @@ def _groups(surfaces: list, edge_faces: list, scale: float) -> np.ndarray:
     """Per CAD face, its patch group (1-based): faces joined by an edge (``edge_faces``: the face indices of
     each edge) that lie on one cylinder, cone, sphere or torus share one."""
     pairs = np.array([pair for pair in edge_faces if len(pair) == 2], np.int64).reshape(-1, 2)
-    same = [surfaces[i].kind == surfaces[j].kind and surfaces[i].kind in ("Cylinder", "Cone", "Sphere", "Torus")
-            and np.allclose(_canonical(surfaces[i]), _canonical(surfaces[j]), atol=SAME_SURFACE * scale)
-            for i, j in pairs]
+    same = [
+        surfaces[i].kind == surfaces[j].kind
+        and surfaces[i].kind in ("Cylinder", "Cone", "Sphere", "Torus")
+        and np.allclose(_canonical(surfaces[i]), _canonical(surfaces[j]), atol=SAME_SURFACE * scale)
+        for i, j in pairs
+    ]
     pairs = pairs[np.asarray(same, bool)] if len(pairs) else pairs
     graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(surfaces),) * 2)
     labels = csgraph.connected_components(graph, directed=False)[1]
@@ -340,7 +395,7 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry) -> None:
     normals = geometry.mesh.face_normals[patch.faces]
     centres = geometry.mesh.triangles_center[patch.faces]
     if surface.kind == "Cylinder" and patch.cylinder is not None:
-        axis = exact.axis if exact.axis @ patch.cylinder.axis > 0 else -exact.axis   # the fit's sign convention
+        axis = exact.axis if exact.axis @ patch.cylinder.axis > 0 else -exact.axis  # the fit's sign convention
         patch.cylinder = dataclasses.replace(patch.cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
     elif surface.kind == "Torus":
         tube = exact.tube_centre(centres)
@@ -351,13 +406,14 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry) -> None:
         rel = centres - exact.apex
         radial = rel - np.outer(rel @ exact.axis, exact.axis)
         radius = np.linalg.norm(radial, axis=1)
-        if np.ptp(np.linalg.norm(rel, axis=1)) < NARROW * radius.mean():    # its width along the generators
+        if np.ptp(np.linalg.norm(rel, axis=1)) < NARROW * radius.mean():  # its width along the generators
             concave = np.mean(np.einsum("ij,ij->i", radial, normals)) < 0
             patch.kinds.append("countersink" if concave else "chamfer")
 
 
-def _curve_edges(features: Features, geometry: Geometry, face: np.ndarray, edge_faces: list, model: CadModel,
-                 edges: np.ndarray) -> list[np.ndarray]:
+def _curve_edges(
+    features: Features, geometry: Geometry, face: np.ndarray, edge_faces: list, model: CadModel, edges: np.ndarray
+) -> list[np.ndarray]:
     """Per curve, the indices into ``edges`` of the CAD edges it runs along: each chord goes to the nearest of
     the edges between the CAD faces on its two sides (``face``: per triangle, ``edge_faces``: per edge);
     empty for a curve inside one CAD face (a chart's cut)."""
@@ -377,7 +433,7 @@ def _curve_edges(features: Features, geometry: Geometry, face: np.ndarray, edge_
         ends = np.column_stack([curve.vertices, np.roll(curve.vertices, -1)])
         ends = np.sort(ends if curve.closed else ends[:-1], axis=1)
         at = order[np.clip(np.searchsorted(keys, ends[:, 0] * n + ends[:, 1], sorter=order), 0, len(keys) - 1)]
-        sides = face[mesh.face_adjacency[at]]                 # (chords, 2) CAD face indices
+        sides = face[mesh.face_adjacency[at]]  # (chords, 2) CAD face indices
         chosen = []
         for pair in np.unique(np.sort(sides, axis=1), axis=0):
             candidates = between.get(frozenset(pair.tolist()), []) if pair[0] != pair[1] else []
@@ -385,8 +441,9 @@ def _curve_edges(features: Features, geometry: Geometry, face: np.ndarray, edge_
                 continue
             mine = (np.sort(sides, axis=1) == pair).all(axis=1)
             middles = mesh.vertices[ends[mine]].mean(axis=1)
-            distance = np.stack([np.linalg.norm(model.closest(1, (int(edges[k]),), middles) - middles, axis=1)
-                                 for k in candidates])
+            distance = np.stack(
+                [np.linalg.norm(model.closest(1, (int(edges[k]),), middles) - middles, axis=1) for k in candidates]
+            )
             chosen += [candidates[k] for k in np.unique(np.argmin(distance, axis=0))]
         out.append(np.unique(np.asarray(chosen, np.int64)))
     return out

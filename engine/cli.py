@@ -4,6 +4,7 @@ Every user error is printed as one line ``fuzzymesh: error: ...`` with the
 error's exit code (engine/errors.py: 2 bad input, 4 mesh rejected by the acceptance
 gate; 1 for lint findings, 3 internal faults); no traceback unless ``--debug``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -76,23 +77,32 @@ def build_parser() -> argparse.ArgumentParser:
     mesh.add_argument("--out", type=Path, help="output folder (overrides the job's output.directory)")
     mesh.add_argument("--size", type=_positive_float, help="global element size (overrides the job's size)")
     mesh.add_argument("--seed", type=_seed, help="random seed >= 0 (overrides the job's seed)")
-    mesh.add_argument("--max-elements", type=_positive_float, default=None,
-                      help="refuse jobs expected to exceed this many tetrahedra (default 2e7)")
+    mesh.add_argument(
+        "--max-elements",
+        type=_positive_float,
+        default=None,
+        help="refuse jobs expected to exceed this many tetrahedra (default 2e7)",
+    )
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
-    mesh.add_argument("--keep-invalid", action="store_true",
-                      help="when the acceptance gate rejects the mesh (exit 4), still write it as "
-                           "<name>.invalid.* for inspection")
+    mesh.add_argument(
+        "--keep-invalid",
+        action="store_true",
+        help="when the acceptance gate rejects the mesh (exit 4), still write it as <name>.invalid.* for inspection",
+    )
     mesh.set_defaults(run=_cmd_mesh)
 
     lint = commands.add_parser("lint", help="check rule, pattern, recipe and feature files")
     lint.add_argument("paths", nargs="*", type=Path, help="files or folders (default: the shipped knowledge base)")
     lint.set_defaults(run=_cmd_lint)
 
-    explain = commands.add_parser("explain", help="explain why a point or an element got its size, or where a "
-                                  "node came from", description="TARGET is a job file (--at: the sizing at a point) "
-                                  "or a mesh output folder or .vtu with its .audit.json (--element N, 0-based, or "
-                                  "--at: the element containing the point; --node N, 0-based: the node's bubble and "
-                                  "the population event that inserted it)")
+    explain = commands.add_parser(
+        "explain",
+        help="explain why a point or an element got its size, or where a node came from",
+        description="TARGET is a job file (--at: the sizing at a point) "
+        "or a mesh output folder or .vtu with its .audit.json (--element N, 0-based, or "
+        "--at: the element containing the point; --node N, 0-based: the node's bubble and "
+        "the population event that inserted it)",
+    )
     explain.add_argument("job", metavar="TARGET", help="job YAML file, or output folder / .vtu file")
     where = explain.add_mutually_exclusive_group(required=True)
     where.add_argument("--at", nargs=3, type=float, metavar=("X", "Y", "Z"))
@@ -100,14 +110,20 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--node", type=int, metavar="N")
     explain.set_defaults(run=_cmd_explain)
 
-    report = commands.add_parser("report", help="rewrite the HTML report of a meshed output folder",
-                                 description="rebuilds <name>.report.html from <name>.vtu, <name>.audit.json "
-                                             "and <name>.report.json in OUT")
+    report = commands.add_parser(
+        "report",
+        help="rewrite the HTML report of a meshed output folder",
+        description="rebuilds <name>.report.html from <name>.vtu, <name>.audit.json and <name>.report.json in OUT",
+    )
     report.add_argument("out", type=Path, metavar="OUT", help="output folder of 'fuzzymesh mesh'")
     report.add_argument("--name", default=None, help="base name of the files (default: the one report there)")
-    report.add_argument("--cut", type=_plane, metavar="AXIS=VALUE",
-                        help="the plane of the cut through the mesh, e.g. z=10 (default: the plane holding the "
-                             "longest and shortest extents, at the median node)")
+    report.add_argument(
+        "--cut",
+        type=_plane,
+        metavar="AXIS=VALUE",
+        help="the plane of the cut through the mesh, e.g. z=10 (default: the plane holding the "
+        "longest and shortest extents, at the median node)",
+    )
     report.set_defaults(run=_cmd_report)
 
     view = commands.add_parser("view", help="open the HTML report of a meshed output folder in the default browser")
@@ -117,61 +133,94 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .validation import CASES
 
-    validate = commands.add_parser("validate", help="solve linear elasticity on a mesh and compare with a published "
-                                   "solution (needs the 'fe' extra)",
-                                   description="plate-hole: Peterson's Kt of a plate with a central hole in tension, "
-                                               "meshed by the static-stress recipe; sphere: Lamé's thick hollow sphere "
-                                               "under internal pressure. Prints the table; see docs/validation.md")
+    validate = commands.add_parser(
+        "validate",
+        help="solve linear elasticity on a mesh and compare with a published solution (needs the 'fe' extra)",
+        description="plate-hole: Peterson's Kt of a plate with a central hole in tension, "
+        "meshed by the static-stress recipe; sphere: Lamé's thick hollow sphere "
+        "under internal pressure. Prints the table; see docs/validation.md",
+    )
     validate.add_argument("case", metavar="NAME", choices=list(CASES), help=f"one of {', '.join(CASES)}")
-    validate.add_argument("--scale", type=_positive_float, default=1.0,
-                          help="multiply every element size by this (default 1; 3: a coarse mesh in seconds)")
+    validate.add_argument(
+        "--scale",
+        type=_positive_float,
+        default=1.0,
+        help="multiply every element size by this (default 1; 3: a coarse mesh in seconds)",
+    )
     validate.add_argument("--seed", type=_seed, default=0, help="random seed of the mesh")
-    validate.add_argument("--study", action="store_true",
-                          help="plate-hole: the convergence study, Kt error against nodes for the recipe's graded mesh "
-                               "and a uniform mesh (minutes); writes fe_convergence.json, .md, .png to --out")
-    validate.add_argument("--seeds", type=int, default=3, metavar="N",
-                          help="--study: mesh every scale with seeds 0 .. N-1 (default 3)")
+    validate.add_argument(
+        "--study",
+        action="store_true",
+        help="plate-hole: the convergence study, Kt error against nodes for the recipe's graded mesh "
+        "and a uniform mesh (minutes); writes fe_convergence.json, .md, .png to --out",
+    )
+    validate.add_argument(
+        "--seeds", type=int, default=3, metavar="N", help="--study: mesh every scale with seeds 0 .. N-1 (default 3)"
+    )
     validate.add_argument("--out", type=Path, default=Path("validation-out"), help="--study: output folder")
     validate.set_defaults(run=_cmd_validate)
 
-    features = commands.add_parser("features", help="list the corners, curves and patches of a solid, with their "
-                                   "kinds, sizes and places (no meshing)",
-                                   description="FILE_OR_JOB is a surface file (STL, OBJ, PLY, OFF, GLB), a CAD file (STEP, IGES, "
-                                               "BREP) or a job file "
-                                               "(its solid: built-in shape or file, named features, feature angle, "
-                                               "knowledge). Lists every corner, curve and patch: id, names, feature "
-                                               "kinds (hole, fillet, junction, re-entrant-edge, ...), size (curve: "
-                                               "length L and circle radius r; patch: a CAD face's type, area A and cylinder "
-                                               "or fillet radius r), "
-                                               "centroid and bounding box")
+    features = commands.add_parser(
+        "features",
+        help="list the corners, curves and patches of a solid, with their kinds, sizes and places (no meshing)",
+        description="FILE_OR_JOB is a surface file (STL, OBJ, PLY, OFF, GLB), a CAD file (STEP, IGES, "
+        "BREP) or a job file "
+        "(its solid: built-in shape or file, named features, feature angle, "
+        "knowledge). Lists every corner, curve and patch: id, names, feature "
+        "kinds (hole, fillet, junction, re-entrant-edge, ...), size (curve: "
+        "length L and circle radius r; patch: a CAD face's type, area A and cylinder "
+        "or fillet radius r), "
+        "centroid and bounding box",
+    )
     features.add_argument("target", metavar="FILE_OR_JOB", help="surface file, CAD file or job YAML file")
-    features.add_argument("--feature-angle", type=_angle, metavar="DEGREES",
-                          help="dihedral angle above which an edge is a feature edge (default: the job's, or 30)")
-    features.add_argument("--knowledge", type=Path, action="append", default=[],
-                          help="extra knowledge files or folders (feature kinds)")
+    features.add_argument(
+        "--feature-angle",
+        type=_angle,
+        metavar="DEGREES",
+        help="dihedral angle above which an edge is a feature edge (default: the job's, or 30)",
+    )
+    features.add_argument(
+        "--knowledge", type=Path, action="append", default=[], help="extra knowledge files or folders (feature kinds)"
+    )
     features.add_argument("--json", action="store_true", help="print JSON instead of the table")
     features.set_defaults(run=_cmd_features)
 
-    batch = commands.add_parser("batch", help="mesh every variant of a study (a parameter grid or a folder of "
-                                "parts) on dask.distributed (needs the 'batch' extra)",
-                                description="STUDY is a study file (docs/batch.md): a base job and what varies. "
-                                            "Writes every variant's outputs to <study folder>/variants/NAME and the "
-                                            "table study.csv / study.parquet and the page study.html; a variant whose "
-                                            "job is unchanged and whose outputs are complete is not meshed again. "
-                                            "Exit 0 when the table is written, whatever the variants' status")
+    batch = commands.add_parser(
+        "batch",
+        help="mesh every variant of a study (a parameter grid or a folder of "
+        "parts) on dask.distributed (needs the 'batch' extra)",
+        description="STUDY is a study file (docs/batch.md): a base job and what varies. "
+        "Writes every variant's outputs to <study folder>/variants/NAME and the "
+        "table study.csv / study.parquet and the page study.html; a variant whose "
+        "job is unchanged and whose outputs are complete is not meshed again. "
+        "Exit 0 when the table is written, whatever the variants' status",
+    )
     batch.add_argument("study", type=Path, metavar="STUDY", help="study YAML file")
-    batch.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask cluster, e.g. tcp://HOST:8786 "
-                       "(default: DASK_SCHEDULER_ADDRESS, else a local cluster)")
-    batch.add_argument("--workers", type=int, metavar="N", help="local cluster: N worker processes (default: one per core)")
-    batch.add_argument("--retries", type=int, default=0, metavar="N",
-                       help="let Dask run a variant that ended in an internal fault or a lost worker N more times")
+    batch.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="an existing Dask cluster, e.g. tcp://HOST:8786 (default: DASK_SCHEDULER_ADDRESS, else a local cluster)",
+    )
+    batch.add_argument(
+        "--workers", type=int, metavar="N", help="local cluster: N worker processes (default: one per core)"
+    )
+    batch.add_argument(
+        "--retries",
+        type=int,
+        default=0,
+        metavar="N",
+        help="let Dask run a variant that ended in an internal fault or a lost worker N more times",
+    )
     batch.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
     batch.set_defaults(run=_cmd_batch)
 
     rules = commands.add_parser("rules", help="export rule bases (e.g. to IEC 61131-7 FCL)")
     rule_verbs = rules.add_subparsers(dest="verb", required=True, parser_class=OneLineParser)
-    export = rule_verbs.add_parser("export", help="write a rule base, or every rule base of a rule file, as FCL; "
-                                                  "annotations keep what FCL cannot hold (docs/rules.md, FCL)")
+    export = rule_verbs.add_parser(
+        "export",
+        help="write a rule base, or every rule base of a rule file, as FCL; "
+        "annotations keep what FCL cannot hold (docs/rules.md, FCL)",
+    )
     export.add_argument("rulebase", help="a rule base id (population.delete) or a rule file id (population)")
     export.add_argument("--fcl", action="store_true", required=True, help="write IEC 61131-7 FCL (the one format)")
     export.add_argument("-o", "--output", type=Path, help="the file to write (default: standard output)")
@@ -184,8 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
         verbs.add_parser("list", help=f"list the {noun}")
         show = verbs.add_parser("show", help=f"show one of the {noun}")
         show.add_argument("name")
-        sub.add_argument("--knowledge", type=Path, action="append", default=[],
-                         help="extra knowledge files or folders")
+        sub.add_argument("--knowledge", type=Path, action="append", default=[], help="extra knowledge files or folders")
         sub.set_defaults(run=_cmd_library, noun=noun)
     return parser
 
@@ -208,9 +256,11 @@ def _cmd_explain(args) -> int:
     if target.is_dir() or target.suffix == ".vtu":
         return _explain_saved(target, args)
     if args.at is None:
-        raise JobError(f"--{'element' if args.node is None else 'node'} needs a mesh output folder or .vtu, "
-                       "not a job file", where=str(target),
-                       fix="run 'fuzzymesh mesh' first and give its output folder")
+        raise JobError(
+            f"--{'element' if args.node is None else 'node'} needs a mesh output folder or .vtu, not a job file",
+            where=str(target),
+            fix="run 'fuzzymesh mesh' first and give its output folder",
+        )
     from .explain import explain_point
     from .job import load_job
     from .pipeline import prepare
@@ -228,14 +278,17 @@ def _explain_saved(target: Path, args) -> int:
 
     import meshio
 
-    from .audit import explain_element, explain_node, element_at
+    from .audit import element_at, explain_element, explain_node
 
     vtu = target if target.suffix == ".vtu" else next(iter(sorted(target.glob("*.vtu"))), target / "mesh.vtu")
     legend_path = vtu.with_suffix(".audit.json")
     for path in (vtu, legend_path):
         if not path.is_file():
-            raise JobError("no saved mesh audit here", where=str(path),
-                           fix="give the output folder of 'fuzzymesh mesh' (it writes <name>.vtu and <name>.audit.json)")
+            raise JobError(
+                "no saved mesh audit here",
+                where=str(path),
+                fix="give the output folder of 'fuzzymesh mesh' (it writes <name>.vtu and <name>.audit.json)",
+            )
     mesh = meshio.read(vtu)
     cells = {name: values[0] for name, values in mesh.cell_data.items()}
     legend = json.loads(legend_path.read_text())
@@ -256,7 +309,9 @@ def _explain_saved(target: Path, args) -> int:
     try:
         print(explain_element(cells, legend, element))
     except IndexError as error:
-        raise JobError(str(error), where=str(vtu), fix="give an element number from 0 to the element count - 1") from None
+        raise JobError(
+            str(error), where=str(vtu), fix="give an element number from 0 to the element count - 1"
+        ) from None
     return 0
 
 
@@ -268,23 +323,31 @@ def _cmd_features(args) -> int:
     source, geometry, features = solid_features(args.target, args.feature_angle, args.knowledge)
     records = feature_records(features)
     if args.json:
-        print(json.dumps({"source": source, "feature_angle": features.feature_angle, "bodies": geometry.bodies,
-                          **records}, indent=1))
+        print(
+            json.dumps(
+                {"source": source, "feature_angle": features.feature_angle, "bodies": geometry.bodies, **records},
+                indent=1,
+            )
+        )
         return 0
-    print(f"{source}: {len(features.corners)} corners, {len(features.curves)} curves, {len(features.patches)} "
-          f"patches (feature angle {features.feature_angle:g} deg"
-          + (f", {geometry.bodies} bodies)" if geometry.bodies > 1 else ")"))
+    print(
+        f"{source}: {len(features.corners)} corners, {len(features.curves)} curves, {len(features.patches)} "
+        f"patches (feature angle {features.feature_angle:g} deg"
+        + (f", {geometry.bodies} bodies)" if geometry.bodies > 1 else ")")
+    )
     print(feature_table(records, geometry.scale))
     return 0
 
 
 def _report_name(args, suffixes: tuple[str, ...], fix: str) -> str:
     """The base name of the one report in args.out (or args.name), its files with these suffixes present."""
-    names = [args.name] if args.name else sorted(p.name[:-len(".report.json")] for p in args.out.glob("*.report.json"))
+    names = [args.name] if args.name else sorted(p.name[: -len(".report.json")] for p in args.out.glob("*.report.json"))
     if len(names) != 1:
-        raise JobError("no report here" if not names else f"several reports here: {', '.join(names)}",
-                       where=str(args.out), fix="give the output folder of 'fuzzymesh mesh'"
-                       + ("" if not names else " and --name NAME"))
+        raise JobError(
+            "no report here" if not names else f"several reports here: {', '.join(names)}",
+            where=str(args.out),
+            fix="give the output folder of 'fuzzymesh mesh'" + ("" if not names else " and --name NAME"),
+        )
     name = names[0]
     for suffix in suffixes:
         if not (args.out / f"{name}{suffix}").is_file():
@@ -295,8 +358,11 @@ def _report_name(args, suffixes: tuple[str, ...], fix: str) -> str:
 def _cmd_report(args) -> int:
     from .report import write_report
 
-    for path in write_report(args.out, _report_name(args, (".vtu", ".audit.json", ".report.json"),
-                                                     "mesh again with 'vtu' among output.formats"), args.cut):
+    for path in write_report(
+        args.out,
+        _report_name(args, (".vtu", ".audit.json", ".report.json"), "mesh again with 'vtu' among output.formats"),
+        args.cut,
+    ):
         print(f"wrote {path}")
     return 0
 
@@ -321,15 +387,21 @@ def _cmd_validate(args) -> int:
         print(run_case(args.case, args.scale, args.seed).table())
         return 0
     if args.case != "plate-hole":
-        raise FuzzymeshError(f"the convergence study is for plate-hole, not {args.case}",
-                             fix="run 'fuzzymesh validate plate-hole --study'")
+        raise FuzzymeshError(
+            f"the convergence study is for plate-hole, not {args.case}",
+            fix="run 'fuzzymesh validate plate-hole --study'",
+        )
     if args.seeds < 1:
         raise FuzzymeshError(f"--seeds must be at least 1, got {args.seeds}", fix="e.g. --seeds 3")
     from .validation.study import run_study, write_study
 
     def progress(row):
-        print(f"{row['series']} x {row['scale']:g}, seed {row['seed']}: {row['nodes']:,} nodes, Kt {row['Kt']:.4f} "
-              f"({100 * row['error']:+.2f} %), {sum(row['seconds'].values()):.0f} s", file=sys.stderr, flush=True)
+        print(
+            f"{row['series']} x {row['scale']:g}, seed {row['seed']}: {row['nodes']:,} nodes, Kt {row['Kt']:.4f} "
+            f"({100 * row['error']:+.2f} %), {sum(row['seconds'].values()):.0f} s",
+            file=sys.stderr,
+            flush=True,
+        )
 
     study = run_study(seeds=range(args.seeds), progress=progress)
     paths = write_study(study, args.out)
@@ -345,13 +417,17 @@ def _cmd_rules_export(args) -> int:
     from .knowledge import load_knowledge
 
     kb = load_knowledge(args.knowledge)
-    whole_file = args.rulebase not in kb.rulebases     # a rule file id: all its rule bases and its packer settings
+    whole_file = args.rulebase not in kb.rulebases  # a rule file id: all its rule bases and its packer settings
     file_id = args.rulebase if whole_file else args.rulebase.rsplit(".", 1)[0]
-    bases = [base for name, base in kb.rulebases.items()
-             if (name.rsplit(".", 1)[0] == file_id if whole_file else name == args.rulebase)]
+    bases = [
+        base
+        for name, base in kb.rulebases.items()
+        if (name.rsplit(".", 1)[0] == file_id if whole_file else name == args.rulebase)
+    ]
     if not bases:
-        raise FuzzymeshError(f"no rule base or rule file '{args.rulebase}'",
-                             fix=f"known rule bases: {', '.join(sorted(kb.rulebases))}")
+        raise FuzzymeshError(
+            f"no rule base or rule file '{args.rulebase}'", fix=f"known rule bases: {', '.join(sorted(kb.rulebases))}"
+        )
     text = to_fcl(bases, file_id, kb.packer_settings.get(file_id) if whole_file else None)
     if args.output is None:
         sys.stdout.write(text)
@@ -371,17 +447,23 @@ def _cmd_library(args) -> int:
             print(f"{name:22s} {summary[:90]}{'...' if len(summary) > 90 else ''}")
         return 0
     if args.name not in table:
-        raise FuzzymeshError(f"no {args.noun[:-1]} named '{args.name}'",
-                             fix=f"known {args.noun}: {', '.join(sorted(table))}")
+        raise FuzzymeshError(
+            f"no {args.noun[:-1]} named '{args.name}'", fix=f"known {args.noun}: {', '.join(sorted(table))}"
+        )
     print(_describe_pattern(table[args.name]) if args.noun == "patterns" else _describe_recipe(table[args.name]))
     return 0
 
 
 def _describe_pattern(pattern) -> str:
-    lines = [f"pattern {pattern.name}  ({pattern.source})", "", " ".join(pattern.doc.split()), "",
-             f"anchor: {pattern.anchor}" + (f"; placed by 'every:' on {', '.join(pattern.accepts)}"
-                                             if pattern.accepts else ""),
-             f"L (scale): {pattern.scale}; H: the job's global size"]
+    lines = [
+        f"pattern {pattern.name}  ({pattern.source})",
+        "",
+        " ".join(pattern.doc.split()),
+        "",
+        f"anchor: {pattern.anchor}"
+        + (f"; placed by 'every:' on {', '.join(pattern.accepts)}" if pattern.accepts else ""),
+        f"L (scale): {pattern.scale}; H: the job's global size",
+    ]
     if pattern.parameters:
         lines.append("parameters:")
         for name, p in pattern.parameters.items():
@@ -390,19 +472,35 @@ def _describe_pattern(pattern) -> str:
     for role, (default, doc) in pattern.roles.items():
         lines.append(f"role {role} (default feature '{default}'): {doc}")
     for zone in pattern.zones:
-        lines.append(f"zone {zone.id} ({zone.source}): distance {zone.distance}, {zone.law} size law "
-                     f"near = {zone.near.text}" + (f", far = {zone.far.text}, over = {zone.over.text}" if zone.far else "")
-                     + (f"; membership trapezoid [{', '.join(e.text for e in zone.trapezoid)}]"
-                        if zone.trapezoid else "; constant membership")
-                     + f", height {zone.height.text}" + (f"; active if {zone.active_if.text} > 0" if zone.active_if else ""))
+        lines.append(
+            f"zone {zone.id} ({zone.source}): distance {zone.distance}, {zone.law} size law "
+            f"near = {zone.near.text}"
+            + (f", far = {zone.far.text}, over = {zone.over.text}" if zone.far else "")
+            + (
+                f"; membership trapezoid [{', '.join(e.text for e in zone.trapezoid)}]"
+                if zone.trapezoid
+                else "; constant membership"
+            )
+            + f", height {zone.height.text}"
+            + (f"; active if {zone.active_if.text} > 0" if zone.active_if else "")
+        )
     return "\n".join(lines)
 
 
 def _describe_recipe(recipe) -> str:
     lines = [f"recipe {recipe.name}  ({recipe.source})", "", " ".join(recipe.doc.split()), "", "places:"]
     for p in recipe.placements:
-        where = (f"at '{p.at}'" if p.at else f"on every {p.every}" if p.every else
-                 f"at {p.point}" if p.point else f"in {p.region}" if p.region else "over the whole solid")
+        where = (
+            f"at '{p.at}'"
+            if p.at
+            else f"on every {p.every}"
+            if p.every
+            else f"at {p.point}"
+            if p.point
+            else f"in {p.region}"
+            if p.region
+            else "over the whole solid"
+        )
         extra = "".join(f", {k} = {v}" for k, v in p.parameters.items())
         roles = "".join(f", {k} -> '{v}'" for k, v in p.roles.items())
         lines.append(f"  {p.pattern} {where}{extra}{roles}  ({p.source})")
@@ -416,8 +514,13 @@ def _cmd_batch(args) -> int:
         raise FuzzymeshError("--workers must be at least 1 and --retries at least 0", fix="e.g. --workers 2")
     rows, files = batch(args.study, args.scheduler, args.workers, args.retries)
     counts = ", ".join(f"{sum(r['status'] == s for r in rows)} {s}" for s in ("ok", "refused", "rejected", "failed"))
-    log.info("%d variants: %s (%d from earlier runs); wrote %s", len(rows), counts,
-             sum(bool(r.get("cached")) for r in rows), ", ".join(map(str, files)))
+    log.info(
+        "%d variants: %s (%d from earlier runs); wrote %s",
+        len(rows),
+        counts,
+        sum(bool(r.get("cached")) for r in rows),
+        ", ".join(map(str, files)),
+    )
     return 0
 
 
@@ -443,14 +546,17 @@ def _cmd_mesh(args) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
-                        format="%(message)s", stream=sys.stderr)
+    logging.basicConfig(
+        level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
+        format="%(message)s",
+        stream=sys.stderr,
+    )
     try:
         return args.run(args)
     except FuzzymeshError as error:
         print(f"fuzzymesh: error: {error.one_line()}", file=sys.stderr)
         return error.exit_code
-    except BrokenPipeError:   # output piped into e.g. head, which closed early
+    except BrokenPipeError:  # output piped into e.g. head, which closed early
         sys.stdout = open(os.devnull, "w")
         return 0
     except KeyboardInterrupt:
@@ -459,8 +565,10 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as error:  # an internal fault, not the user's: one line unless --debug
         if args.debug:
             raise
-        print(f"fuzzymesh: internal error: {error.__class__.__name__}: {error} (run with --debug for details)",
-              file=sys.stderr)
+        print(
+            f"fuzzymesh: internal error: {error.__class__.__name__}: {error} (run with --debug for details)",
+            file=sys.stderr,
+        )
         return 3
 
 

@@ -15,11 +15,13 @@ principal curvatures k1, k2, concave (a hole, a fillet) or convex alike; planar 
 than ``PLANAR`` x the model size, have none (inf). A triangle of edge h on the surface strays from it by
 h^2 / (8 r) at most with r this radius: on a cylinder or a saddle it is the smaller principal radius (an edge
 across the axis), on a doubly curved blend (both curvatures of one sign) up to 3/4 of it, as an equilateral
-triangle's centre lies h^2 (k1 + k2) / 12 off the surface (h^2 / (6 r) on a sphere). A planar face along a tangent fillet takes some of the fillet's curvature
-(about twice its radius). One radius per face: along a cone's long facets it is the facet's, not its tip's.
-Measured once per geometry and feature angle (:func:`curvature`); the faces are grouped in classes of like
+triangle's centre lies h^2 (k1 + k2) / 12 off the surface (h^2 / (6 r) on a sphere). A planar face along a
+tangent fillet takes some of the fillet's curvature (about twice its radius). One radius per face: along a
+cone's long facets it is the facet's, not its tip's. Measured once per geometry and feature angle
+(:func:`curvature`); the faces are grouped in classes of like
 radius by :func:`engine.thickness.classes`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,7 +33,7 @@ from scipy.sparse import csgraph
 
 from .thickness import LocalPart, classes
 
-PLANAR = 10.0     # radii above this, times the model size, are planar (inf)
+PLANAR = 10.0  # radii above this, times the model size, are planar (inf)
 
 
 @dataclass
@@ -39,8 +41,8 @@ class Curvature:
     """The chord radius of each input face (inf where planar): the smaller principal radius, 3/4 of it on a
     sphere (see the module doc)."""
 
-    triangles: np.ndarray     # (m, 3, 3) the input faces
-    radius: np.ndarray        # (m,)
+    triangles: np.ndarray  # (m, 3, 3) the input faces
+    radius: np.ndarray  # (m,)
 
     def parts(self) -> list[LocalPart]:
         """The curved faces in classes of like radius, most curved first (ids ``radius-R``)."""
@@ -61,22 +63,23 @@ def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:
     V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
     scale = float(np.linalg.norm(np.ptp(V, axis=0)))
     T = V[F]
-    edges = np.roll(T, -1, axis=1) - T                                # edges[:, i] = p[i + 1] - p[i]
+    edges = np.roll(T, -1, axis=1) - T  # edges[:, i] = p[i + 1] - p[i]
     cross = np.cross(edges[:, 0], edges[:, 1])
     area = np.linalg.norm(cross, axis=1) / 2
-    good = area > 1e-12 * scale ** 2
+    good = area > 1e-12 * scale**2
     normal = cross / np.where(good, 2 * area, 1.0)[:, None]
-    fan, fans = _fans(mesh, feature_angle)                            # fan of each corner (3 f + i)
+    fan, fans = _fans(mesh, feature_angle)  # fan of each corner (3 f + i)
     fan_normal = _fan_normals(fan, fans, edges, normal)
     corner_normal = fan_normal[fan].reshape(-1, 3, 3)
     t1 = edges[:, 0] / np.maximum(np.linalg.norm(edges[:, 0], axis=1), 1e-300)[:, None]
-    frame = np.stack([t1, np.cross(normal, t1)], axis=2)              # (m, 3, 2): the face's plane
+    frame = np.stack([t1, np.cross(normal, t1)], axis=2)  # (m, 3, 2): the face's plane
     own = np.zeros((len(F), 2, 2))
-    own[good] = _fit(edges[good] @ frame[good], (np.roll(corner_normal, -1, axis=1) - corner_normal)[good]
-                     @ frame[good])
+    own[good] = _fit(
+        edges[good] @ frame[good], (np.roll(corner_normal, -1, axis=1) - corner_normal)[good] @ frame[good]
+    )
     face = np.repeat(np.arange(len(F)), 3)
-    turn = _rotations(normal[face], fan_normal[fan])                  # per corner: face frame -> fan frame
-    quality = 4 * np.sqrt(3) * area / np.maximum(np.einsum("fij,fij->f", edges, edges), 1e-300)   # 1: equilateral
+    turn = _rotations(normal[face], fan_normal[fan])  # per corner: face frame -> fan frame
+    quality = 4 * np.sqrt(3) * area / np.maximum(np.einsum("fij,fij->f", edges, edges), 1e-300)  # 1: equilateral
     weight = np.repeat(np.where(good, area * quality, 0.0), 3)
     gather = sparse.csr_matrix((np.ones(len(fan)), (fan, np.arange(len(fan)))), shape=(fans, len(fan)))
     fan_weight = gather @ weight
@@ -97,22 +100,27 @@ def _fans(mesh: trimesh.Trimesh, feature_angle: float):
     smooth = mesh.face_adjacency_angles <= np.radians(feature_angle)
     a, b = mesh.face_adjacency[smooth].T
     shared = mesh.face_adjacency_edges[smooth]
-    corner = lambda f, v: 3 * f + np.argmax(F[f] == v[:, None], axis=1)
+
+    def corner(f, v):
+        return 3 * f + np.argmax(F[f] == v[:, None], axis=1)
+
     rows = np.concatenate([corner(a, shared[:, 0]), corner(a, shared[:, 1])])
     cols = np.concatenate([corner(b, shared[:, 0]), corner(b, shared[:, 1])])
     n = 3 * len(F)
-    fans, fan = csgraph.connected_components(sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
-                                             directed=False)
+    fans, fan = csgraph.connected_components(
+        sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False
+    )
     return fan, fans
 
 
 def _fan_normals(fan, fans, edges, normal):
     """Mean face normal of each fan with Max's weights (sin of the corner's angle over its two edges' lengths:
     exact at the vertices of triangles inscribed in a sphere), unit length."""
-    before = -np.roll(edges, 1, axis=1)                               # from corner i to p[i - 1]
-    weight = (np.linalg.norm(np.cross(edges, before), axis=2)
-              / np.maximum(np.einsum("fij,fij->fi", edges, edges) * np.einsum("fij,fij->fi", before, before),
-                           1e-300)).ravel()
+    before = -np.roll(edges, 1, axis=1)  # from corner i to p[i - 1]
+    weight = (
+        np.linalg.norm(np.cross(edges, before), axis=2)
+        / np.maximum(np.einsum("fij,fij->fi", edges, edges) * np.einsum("fij,fij->fi", before, before), 1e-300)
+    ).ravel()
     total = np.stack([np.bincount(fan, weight * np.repeat(normal[:, j], 3), minlength=fans) for j in range(3)], 1)
     return total / np.maximum(np.linalg.norm(total, axis=1), 1e-300)[:, None]
 

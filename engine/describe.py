@@ -4,12 +4,11 @@
 knowledge base's feature kinds, without sizing or meshing; :func:`feature_records` and
 :func:`feature_table` list them for ``fuzzymesh features`` (JSON-ready records, aligned text).
 """
+
 from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-
-import numpy as np
 
 from .features import Features, centroid, classify, coordinates, detect_features, number
 
@@ -26,8 +25,9 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
 
     target = Path(target)
     if target.suffix.lower() in CAD_FORMATS:
-        geometry, features = load_cad(target, 30.0 if feature_angle is None else feature_angle,
-                                      allow_multiple_solids=True)
+        geometry, features = load_cad(
+            target, 30.0 if feature_angle is None else feature_angle, allow_multiple_solids=True
+        )
     elif target.suffix.lower() in SURFACE_FORMATS:
         geometry = load_surface(target, allow_multiple_solids=True)
         features = detect_features(geometry) if feature_angle is None else detect_features(geometry, feature_angle)
@@ -46,24 +46,34 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
 
 def feature_records(features: Features) -> dict:
     """Every corner, curve and patch: id, names, kinds, size (curve length and circle radius, patch area
-    and cylinder or torus tube radius, and a CAD face's type), whether a curve is sharp (a smooth cut is one that charts a surface), convex, its
-    dihedral angle (degrees, the kinds' ``dihedral_above`` / ``dihedral_below``), centroid
-    and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
+    and cylinder or torus tube radius, and a CAD face's type), whether a curve is sharp (a smooth cut is one
+    that charts a surface), convex, its dihedral angle (degrees, the kinds' ``dihedral_above`` /
+    ``dihedral_below``), centroid and bounding box; JSON-ready, by type (``corners``, ``curves``, ``patches``)."""
     out = {}
     for kind, plural in TYPES:
         records = []
         for feature in getattr(features, plural):
-            points = feature.point[None] if kind == "corner" else feature.points if kind == "curve" else feature.vertices
+            points = (
+                feature.point[None] if kind == "corner" else feature.points if kind == "curve" else feature.vertices
+            )
             record = {"id": feature.id, "names": list(feature.names), "kinds": list(getattr(feature, "kinds", []))}
             if kind == "curve":
-                record.update(length=feature.length, radius=feature.circle.radius if feature.circle else None,
-                              closed=feature.closed, sharp=feature.sharp, convex=feature.convex,
-                              dihedral=feature.dihedral)
+                record.update(
+                    length=feature.length,
+                    radius=feature.circle.radius if feature.circle else None,
+                    closed=feature.closed,
+                    sharp=feature.sharp,
+                    convex=feature.convex,
+                    dihedral=feature.dihedral,
+                )
             if kind == "patch":
-                radius = feature.cylinder.radius if feature.cylinder else feature.circle.radius if feature.circle else None
+                radius = (
+                    feature.cylinder.radius if feature.cylinder else feature.circle.radius if feature.circle else None
+                )
                 record.update(area=feature.area, radius=radius, surface=feature.surface)
-            record.update(centroid=centroid(feature).tolist(), bounds=[points.min(axis=0).tolist(),
-                                                                      points.max(axis=0).tolist()])
+            record.update(
+                centroid=centroid(feature).tolist(), bounds=[points.min(axis=0).tolist(), points.max(axis=0).tolist()]
+            )
             records.append(record)
         out[plural] = records
     return out
@@ -76,13 +86,22 @@ def feature_table(records: dict, scale: float) -> str:
     rows = [header]
     for _, plural in TYPES:
         for r in records[plural]:
-            size = (f"L {number(r['length'])}" if "length" in r else f"A {number(r['area'])}" if "area" in r
-                    else "") + (f", r {number(r['radius'])}" if r.get("radius") is not None else "")
+            size = (
+                f"L {number(r['length'])}" if "length" in r else f"A {number(r['area'])}" if "area" in r else ""
+            ) + (f", r {number(r['radius'])}" if r.get("radius") is not None else "")
             low, high = r["bounds"]
             box = "-" if low == high else f"[{coordinates(low, scale)}] .. [{coordinates(high, scale)}]"
             kinds = r["kinds"] + (["(smooth cut)"] if r.get("sharp") is False else [])
             size = f"{r['surface']} {size}" if r.get("surface") else size
-            rows.append((r["id"], ", ".join(r["names"]) or "-", ", ".join(kinds) or "-", size or "-",
-                         coordinates(r["centroid"], scale), box))
+            rows.append(
+                (
+                    r["id"],
+                    ", ".join(r["names"]) or "-",
+                    ", ".join(kinds) or "-",
+                    size or "-",
+                    coordinates(r["centroid"], scale),
+                    box,
+                )
+            )
     widths = [max(len(row[k]) for row in rows) for k in range(len(header))]
     return "\n".join("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows)

@@ -6,6 +6,7 @@ do about it. The CLI prints it as one line and exits with the error's ``exit_cod
 2 for bad input or a limit, 4 for a mesh the acceptance gate rejected
 (3 is an internal fault, 1 lint findings).
 """
+
 from __future__ import annotations
 
 

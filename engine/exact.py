@@ -9,6 +9,7 @@ peaks at the polygon's corners that refinement never removes). Curve nodes go on
 the exact surfaces of the patches the curve borders (alternating projections); corners stay where the
 input has them. Patches that fit no analytic surface (freeform, or blends of several) keep the facets.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,8 +20,8 @@ import numpy as np
 from .levels import Level
 from .mesh import signed_volumes
 
-EXACT_TOLERANCE = 1e-6   # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
-ROUNDS = 8               # alternating projections onto the surfaces a curve borders
+EXACT_TOLERANCE = 1e-6  # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
+ROUNDS = 8  # alternating projections onto the surfaces a curve borders
 
 
 @dataclass(frozen=True)
@@ -78,8 +79,8 @@ class Sphere:
 @dataclass(frozen=True)
 class Cone:
     apex: np.ndarray
-    axis: np.ndarray      # unit, from the apex into the cone
-    angle: float          # half-angle, radians
+    axis: np.ndarray  # unit, from the apex into the cone
+    angle: float  # half-angle, radians
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """Closest points (k, 3) on the cone's nappe (the apex for points behind it); points on the axis
@@ -110,7 +111,7 @@ def fit_cone(vertices: np.ndarray, normals: np.ndarray, centres: np.ndarray) -> 
     spread = normals - normals.mean(axis=0)
     singular = np.linalg.svd(spread, compute_uv=False)
     if len(normals) < 6 or singular[1] < 1e-3 * len(normals) ** 0.5 or singular[2] > 0.05 * singular[0]:
-        return None     # one normal (a plane), or normals all round (a sphere): no cone
+        return None  # one normal (a plane), or normals all round (a sphere): no cone
     apex, *_ = np.linalg.lstsq(normals, np.einsum("ij,ij->i", normals, centres), rcond=None)
     rel = vertices - apex
     distance = np.linalg.norm(rel, axis=1)
@@ -142,7 +143,9 @@ def _refined(cone: Cone, vertices: np.ndarray) -> Cone:
         across = np.linalg.norm(rel - np.outer(along, axis), axis=1)
         return across * np.cos(angle) - along * np.sin(angle)
 
-    start = np.r_[cone.apex, np.arccos(np.clip(cone.axis[2], -1, 1)), np.arctan2(cone.axis[1], cone.axis[0]), cone.angle]
+    start = np.r_[
+        cone.apex, np.arccos(np.clip(cone.axis[2], -1, 1)), np.arctan2(cone.axis[1], cone.axis[0]), cone.angle
+    ]
     apex, axis, angle = unpack(least_squares(distances, start, method="lm").x)
     return Cone(apex, axis, float(angle)) if 0 < angle < np.pi / 2 else cone
 
@@ -170,8 +173,14 @@ class Torus:
         return np.where(length > 0, tube + self.minor * rel / np.where(length > 0, length, 1), x)
 
 
-def fit_surface(vertices: np.ndarray, planar: bool, cylinder, tolerance: float, normals: np.ndarray | None = None,
-                centres: np.ndarray | None = None):
+def fit_surface(
+    vertices: np.ndarray,
+    planar: bool,
+    cylinder,
+    tolerance: float,
+    normals: np.ndarray | None = None,
+    centres: np.ndarray | None = None,
+):
     """The Plane, CylinderSurface, Sphere or Cone all ``vertices`` (k, 3) lie on within ``tolerance``, or
     None. ``cylinder`` is the patch's fitted :class:`engine.features.Cylinder` (its axis), if any; the
     faces' ``normals`` and ``centres`` (f, 3), if given, allow a cone."""
@@ -191,7 +200,7 @@ def fit_surface(vertices: np.ndarray, planar: bool, cylinder, tolerance: float, 
     else:
         # algebraic sphere fit: |x|^2 = 2 c.x + (r^2 - |c|^2)
         matrix = np.column_stack([2 * vertices, np.ones(len(vertices))])
-        solution, *_ = np.linalg.lstsq(matrix, (vertices ** 2).sum(axis=1), rcond=None)
+        solution, *_ = np.linalg.lstsq(matrix, (vertices**2).sum(axis=1), rcond=None)
         centre = solution[:3]
         candidates.append(Sphere(centre, float(np.sqrt(max(solution[3] + centre @ centre, 0.0)))))
         cone = fit_cone(vertices, normals, centres) if normals is not None else None
@@ -211,8 +220,10 @@ def exact_surfaces(geometry, features) -> list:
         return list(features.exact[0])
     tolerance = EXACT_TOLERANCE * geometry.scale
     normals, centres = geometry.mesh.face_normals, geometry.mesh.triangles_center
-    return [fit_surface(p.vertices, p.planar, p.cylinder, tolerance, normals[p.faces], centres[p.faces])
-            for p in features.patches]
+    return [
+        fit_surface(p.vertices, p.planar, p.cylinder, tolerance, normals[p.faces], centres[p.faces])
+        for p in features.patches
+    ]
 
 
 def curve_surfaces(geometry, features, surfaces: list) -> list[list]:
@@ -264,12 +275,17 @@ def on_exact_surfaces(mesh, geometry, features):
                 mine = nodes[mesh.node_entity[nodes] == entity]
                 points[mine] = onto_intersection(table[entity], points[mine])
     kept = np.zeros(len(points), bool)
-    while (bad := signed_volumes(points, mesh.tets) <= 0).any():   # ends: the input mesh has none
+    while (bad := signed_volumes(points, mesh.tets) <= 0).any():  # ends: the input mesh has none
         back = np.unique(mesh.tets[bad])
         points[back], kept[back] = mesh.points[back], True
     distance = np.linalg.norm(points - mesh.points, axis=1)
-    stats = {"exact_patches": sum(s is not None for s in surfaces), "patches": len(surfaces),
-             "exact_curves": sum(bool(a) for a in along), "curves": len(along),
-             "nodes_moved": int((distance > 0).sum()), "largest_move": float(distance.max(initial=0.0)),
-             "nodes_kept_for_validity": int(kept.sum())}
+    stats = {
+        "exact_patches": sum(s is not None for s in surfaces),
+        "patches": len(surfaces),
+        "exact_curves": sum(bool(a) for a in along),
+        "curves": len(along),
+        "nodes_moved": int((distance > 0).sum()),
+        "largest_move": float(distance.max(initial=0.0)),
+        "nodes_kept_for_validity": int(kept.sum()),
+    }
     return dataclasses.replace(mesh, points=points), stats

@@ -5,14 +5,20 @@ are rejected at load time with a message naming what is allowed. Values are
 Python floats, so a division by zero, an overflowing power or a complex result
 is an :class:`ExpressionError` saying which, not a silent inf or nan.
 """
+
 from __future__ import annotations
 
 import ast
 import math
 import operator
 
-_BINARY = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul, ast.Div: operator.truediv,
-           ast.Pow: operator.pow}
+_BINARY = {
+    ast.Add: operator.add,
+    ast.Sub: operator.sub,
+    ast.Mult: operator.mul,
+    ast.Div: operator.truediv,
+    ast.Pow: operator.pow,
+}
 _FUNCTIONS = {"min": min, "max": max}
 
 
@@ -23,7 +29,7 @@ class ExpressionError(ValueError):
 def _finite(number) -> bool:
     try:
         return math.isfinite(number)
-    except OverflowError:   # an integer too large for a float
+    except OverflowError:  # an integer too large for a float
         return False
 
 
@@ -32,7 +38,7 @@ class Expression:
 
     def __init__(self, text, names: set[str], where: str | None = None):
         self.text = str(text)
-        self.where = where   # file:line:col of the expression, for messages
+        self.where = where  # file:line:col of the expression, for messages
         if isinstance(text, bool) or not isinstance(text, (int, float, str)):
             raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
         if isinstance(text, (int, float)) and not _finite(text):
@@ -61,8 +67,13 @@ class Expression:
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
             self._check(node.operand, names)
             return
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS \
-                and node.args and not node.keywords:
+        if (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Name)
+            and node.func.id in _FUNCTIONS
+            and node.args
+            and not node.keywords
+        ):
             for arg in node.args:
                 self._check(arg, names)
             return
@@ -83,7 +94,7 @@ class Expression:
         if isinstance(node, ast.Constant):
             return float(node.value)
         if isinstance(node, ast.Name):
-            return float(values[node.id])   # a Python float: numpy's would give inf with a warning, not an error
+            return float(values[node.id])  # a Python float: numpy's would give inf with a warning, not an error
         if isinstance(node, ast.BinOp):
             value = _BINARY[type(node.op)](self._eval(node.left, values), self._eval(node.right, values))
             if isinstance(value, complex):

@@ -7,6 +7,7 @@ action) goes into annotations ``(*@ {YAML flow mapping} *)``, comments to every 
 ``engine.knowledge.load_rules`` checks both alike and its errors point into the ``.fcl`` file.
 See docs/rules.md section 2, *FCL*.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,27 +19,34 @@ from .fuzzy import RuleBase
 from .yamlfile import Located, parse_yaml
 
 IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-TOKEN = re.compile(r"""
+TOKEN = re.compile(
+    r"""
     (?P<space>\s+)
   | (?P<note>\(\*@(?P<body>.*?)\*\))
   | (?P<comment>\(\*.*?\*\)|//[^\n]*)
   | (?P<number>[-+]?(?:\d+(?:\.\d+)?|\.\d+)(?:[eE][-+]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<punct>:=|\.\.|[:;(),])
-""", re.VERBOSE | re.DOTALL)
-SHAPES = {"TRAP": 4, "TRAPE": 4, "TRAPEZOID": 4, "TRIAN": 3, "TRIANGLE": 3}   # jFuzzyLogic's and fuzzylite's names
-SETTINGS = {"AND": "MIN", "ACT": "MIN", "ACCU": "MAX", "METHOD": "COG"}        # the only inference fuzzymesh has
+""",
+    re.VERBOSE | re.DOTALL,
+)
+SHAPES = {"TRAP": 4, "TRAPE": 4, "TRAPEZOID": 4, "TRIAN": 3, "TRIANGLE": 3}  # jFuzzyLogic's and fuzzylite's names
+SETTINGS = {"AND": "MIN", "ACT": "MIN", "ACCU": "MAX", "METHOD": "COG"}  # the only inference fuzzymesh has
 FIX_SETTING = "fuzzymesh infers with AND : MIN, ACT : MIN, ACCU : MAX and METHOD : COG (docs/rules.md, FCL)"
 
 
 # ------------------------------------------------------------------------------------------ writer
 
+
 def to_fcl(bases: list[RuleBase], file_id: str, settings: dict | None = None) -> str:
     """FCL text of rule bases of the rule file ``file_id`` (all named ``file_id.NAME``), with its packer settings."""
     header = {"id": file_id, **({"packer": settings} if settings else {})}
-    lines = [f"(* rule file '{file_id}' of fuzzymesh: the annotations, comments that begin with '(*@', hold what "
-             "FCL cannot *)",
-             _note(header), ""]
+    lines = [
+        f"(* rule file '{file_id}' of fuzzymesh: the annotations, comments that begin with '(*@', hold what "
+        "FCL cannot *)",
+        _note(header),
+        "",
+    ]
     for base in bases:
         lines += _block(base, file_id)
     return "\n".join(lines)
@@ -46,11 +54,18 @@ def to_fcl(bases: list[RuleBase], file_id: str, settings: dict | None = None) ->
 
 def _block(base: RuleBase, file_id: str) -> list[str]:
     name = base.id.removeprefix(f"{file_id}.")
-    for word in [name, *base.inputs, *base.outputs,
-                 *(t for v in [*base.inputs.values(), *base.outputs.values()] for t in v.terms)]:
+    for word in [
+        name,
+        *base.inputs,
+        *base.outputs,
+        *(t for v in [*base.inputs.values(), *base.outputs.values()] for t in v.terms),
+    ]:
         if not IDENTIFIER.match(word):
-            raise KnowledgeError(f"FCL cannot name '{word}' of rule base '{base.id}'", where=base.source,
-                                 fix="FCL names are letters, digits and '_', not starting with a digit; rename it")
+            raise KnowledgeError(
+                f"FCL cannot name '{word}' of rule base '{base.id}'",
+                where=base.source,
+                fix="FCL names are letters, digits and '_', not starting with a digit; rename it",
+            )
     note = {"resolution": base.resolution, **({"action": base.extra["action"]} if "action" in base.extra else {})}
     lines = [f"FUNCTION_BLOCK {name} {_note(note)}", ""]
     for section, variables in (("VAR_INPUT", base.inputs), ("VAR_OUTPUT", base.outputs)):
@@ -60,8 +75,7 @@ def _block(base: RuleBase, file_id: str) -> list[str]:
             lines += [f"{section} {var.name}", f"    RANGE := ({_num(var.universe[0])} .. {_num(var.universe[1])});"]
             for term in var.terms.values():
                 a, b, c, d = term.points
-                shape = f"TRIAN {_num(a)} {_num(b)} {_num(d)}" if b == c else \
-                    f"TRAP {' '.join(map(_num, term.points))}"
+                shape = f"TRIAN {_num(a)} {_num(b)} {_num(d)}" if b == c else f"TRAP {' '.join(map(_num, term.points))}"
                 lines.append(f"    TERM {term.name} := {shape};")
             if var.default is not None:
                 lines += ["    METHOD : COG;", f"    DEFAULT := {_num(var.default)};"]
@@ -85,6 +99,7 @@ def _note(values: dict) -> str:
 
 # ------------------------------------------------------------------------------------------ reader
 
+
 class _Tokens:
     """The tokens of an FCL text, each ``(kind, text, line, col)``; annotations kept, comments dropped."""
 
@@ -94,8 +109,11 @@ class _Tokens:
         while pos < len(text):
             m = TOKEN.match(text, pos)
             if m is None:
-                raise KnowledgeError(f"unexpected character {text[pos]!r}", where=f"{source}:{line}:{pos - start + 1}",
-                                     fix="FCL has names, numbers, := .. : ; ( ) , and (* comments *)")
+                raise KnowledgeError(
+                    f"unexpected character {text[pos]!r}",
+                    where=f"{source}:{line}:{pos - start + 1}",
+                    fix="FCL has names, numbers, := .. : ; ( ) , and (* comments *)",
+                )
             kind = m.lastgroup if m.lastgroup != "body" else "note"
             if kind not in ("space", "comment"):
                 value = m.group("body") if kind == "note" else m.group()
@@ -134,8 +152,9 @@ class _Tokens:
         where = f"{self.source}:{line}:{col}"
         value = parse_yaml(body, where, KnowledgeError)
         if not isinstance(value, Located):
-            raise KnowledgeError("an annotation (*@ ... *) must hold a mapping", where=where,
-                                 fix="write e.g. (*@ {id: delete-small} *)")
+            raise KnowledgeError(
+                "an annotation (*@ ... *) must hold a mapping", where=where, fix="write e.g. (*@ {id: delete-small} *)"
+            )
         return _relocate(value, self.source, line, col + 3)
 
 
@@ -169,8 +188,11 @@ def _put(node: Located, key, value, mark) -> None:
 def _merge(node: Located, note: Located | None) -> None:
     for key, value in (note or {}).items():
         if key in node:
-            raise KnowledgeError(f"the annotation sets '{key}', which the FCL already gives", where=note.where(key),
-                                 fix=f"remove '{key}' from the annotation")
+            raise KnowledgeError(
+                f"the annotation sets '{key}', which the FCL already gives",
+                where=note.where(key),
+                fix=f"remove '{key}' from the annotation",
+            )
         _put(node, key, value, (None, None, *note.key_marks[key]))
 
 
@@ -183,12 +205,16 @@ def parse_fcl(text: str, source: str) -> Located:
     while tokens.peek()[0] != "end":
         name, base = _function_block(tokens)
         if name[1] in bases:
-            raise KnowledgeError(f"FUNCTION_BLOCK '{name[1]}' is defined twice", where=tokens.where(name),
-                                 fix="give each FUNCTION_BLOCK its own name")
+            raise KnowledgeError(
+                f"FUNCTION_BLOCK '{name[1]}' is defined twice",
+                where=tokens.where(name),
+                fix="give each FUNCTION_BLOCK its own name",
+            )
         _put(bases, name[1], base, name)
     if not bases:
-        raise KnowledgeError("no FUNCTION_BLOCK", where=tokens.where(), fix="write FUNCTION_BLOCK NAME ... "
-                                                                              "END_FUNCTION_BLOCK")
+        raise KnowledgeError(
+            "no FUNCTION_BLOCK", where=tokens.where(), fix="write FUNCTION_BLOCK NAME ... END_FUNCTION_BLOCK"
+        )
     if "id" not in root:
         _put(root, "id", Path(source).stem, (None, None, 1, 1))
     _put(root, "rulebases", bases, tokens.items[0])
@@ -211,22 +237,34 @@ def _function_block(tokens: _Tokens):
             _variable(tokens, blocks)
         elif tokens.is_word("RULEBLOCK"):
             if rules is not None:
-                raise KnowledgeError("a second RULEBLOCK", where=tokens.where(start),
-                                     fix="put all rules of a FUNCTION_BLOCK into one RULEBLOCK")
+                raise KnowledgeError(
+                    "a second RULEBLOCK",
+                    where=tokens.where(start),
+                    fix="put all rules of a FUNCTION_BLOCK into one RULEBLOCK",
+                )
             rules = _ruleblock(tokens)
         else:
-            raise KnowledgeError(f"expected VAR_INPUT, VAR_OUTPUT, FUZZIFY, DEFUZZIFY, RULEBLOCK or "
-                                 f"END_FUNCTION_BLOCK, found '{start[1]}'", where=tokens.where(start))
+            raise KnowledgeError(
+                f"expected VAR_INPUT, VAR_OUTPUT, FUZZIFY, DEFUZZIFY, RULEBLOCK or "
+                f"END_FUNCTION_BLOCK, found '{start[1]}'",
+                where=tokens.where(start),
+            )
     end = tokens.take()
     for section, variables in declared.items():
         block = "FUZZIFY" if section == "VAR_INPUT" else "DEFUZZIFY"
         for var, body in variables.items():
             if "terms" not in body:
-                raise KnowledgeError(f"'{var}' has no {block} block", where=variables.where(var),
-                                     fix=f"add {block} {var} with RANGE := (low .. high); and TERMs")
+                raise KnowledgeError(
+                    f"'{var}' has no {block} block",
+                    where=variables.where(var),
+                    fix=f"add {block} {var} with RANGE := (low .. high); and TERMs",
+                )
     if rules is None:
-        raise KnowledgeError(f"FUNCTION_BLOCK '{name[1]}' has no RULEBLOCK", where=tokens.where(end),
-                             fix="add RULEBLOCK NAME ... END_RULEBLOCK with its RULEs")
+        raise KnowledgeError(
+            f"FUNCTION_BLOCK '{name[1]}' has no RULEBLOCK",
+            where=tokens.where(end),
+            fix="add RULEBLOCK NAME ... END_RULEBLOCK with its RULEs",
+        )
     _put(base, "inputs", declared["VAR_INPUT"], name)
     _put(base, "outputs", declared["VAR_OUTPUT"], name)
     _put(base, "rules", rules[1], rules[0])
@@ -253,15 +291,19 @@ def _variable(tokens: _Tokens, blocks: dict) -> None:
     variables = blocks[block]
     if name[1] not in variables:
         kind = "VAR_INPUT" if block == "FUZZIFY" else "VAR_OUTPUT"
-        raise KnowledgeError(f"{block} '{name[1]}' is not declared in {kind}", where=tokens.where(name),
-                             fix=f"declare it: {kind} {name[1]} : REAL; END_VAR")
+        raise KnowledgeError(
+            f"{block} '{name[1]}' is not declared in {kind}",
+            where=tokens.where(name),
+            fix=f"declare it: {kind} {name[1]} : REAL; END_VAR",
+        )
     var = variables[name[1]]
     if "terms" in var:
         raise KnowledgeError(f"a second {block} block for '{name[1]}'", where=tokens.where(name))
     terms = _node(tokens, name)
     while not tokens.is_word(f"END_{block}"):
-        word = tokens.take("name", fix=f"a {block} block holds RANGE, TERM"
-                                       f"{', METHOD, DEFAULT, ACCU' if block == 'DEFUZZIFY' else ''}")
+        word = tokens.take(
+            "name", fix=f"a {block} block holds RANGE, TERM{', METHOD, DEFAULT, ACCU' if block == 'DEFUZZIFY' else ''}"
+        )
         key = word[1].upper()
         if key == "RANGE":
             tokens.take(word=":=")
@@ -277,15 +319,17 @@ def _variable(tokens: _Tokens, blocks: dict) -> None:
             shape = tokens.take("name", fix="give TRAP a b c d or TRIAN a b c")
             count = SHAPES.get(shape[1].upper())
             if count is None:
-                raise KnowledgeError(f"membership function '{shape[1]}' is not supported", where=tokens.where(shape),
-                                     fix="give TRAP a b c d (trapezoid) or TRIAN a b c (triangle)")
+                raise KnowledgeError(
+                    f"membership function '{shape[1]}' is not supported",
+                    where=tokens.where(shape),
+                    fix="give TRAP a b c d (trapezoid) or TRIAN a b c (triangle)",
+                )
             if label[1] in terms:
                 raise KnowledgeError(f"term '{label[1]}' of '{name[1]}' is defined twice", where=tokens.where(label))
             _put(terms, label[1], [float(tokens.take("number")[1]) for _ in range(count)], label)
         elif block == "DEFUZZIFY" and key == "DEFAULT":
             tokens.take(word=":=")
-            _put(var, "default", float(tokens.take("number", fix="DEFAULT := NUMBER; (NC is not supported)")[1]),
-                 word)
+            _put(var, "default", float(tokens.take("number", fix="DEFAULT := NUMBER; (NC is not supported)")[1]), word)
         elif block == "DEFUZZIFY" and key in ("METHOD", "ACCU"):
             _setting(tokens, word)
             continue
@@ -294,8 +338,11 @@ def _variable(tokens: _Tokens, blocks: dict) -> None:
         tokens.take(word=";")
     tokens.take()
     if "universe" not in var:
-        raise KnowledgeError(f"{block} '{name[1]}' has no RANGE", where=tokens.where(name),
-                             fix="add RANGE := (low .. high); (inputs are clipped to it)")
+        raise KnowledgeError(
+            f"{block} '{name[1]}' has no RANGE",
+            where=tokens.where(name),
+            fix="add RANGE := (low .. high); (inputs are clipped to it)",
+        )
     _put(var, "terms", terms, name)
 
 
@@ -318,8 +365,11 @@ def _ruleblock(tokens: _Tokens):
         if key in ("AND", "ACT", "ACCU"):
             _setting(tokens, word)
         elif key == "OR":
-            raise KnowledgeError("OR is not supported", where=tokens.where(word),
-                                 fix="fuzzymesh rules have no OR: write one rule per alternative")
+            raise KnowledgeError(
+                "OR is not supported",
+                where=tokens.where(word),
+                fix="fuzzymesh rules have no OR: write one rule per alternative",
+            )
         elif key == "RULE":
             rules.append(_rule(tokens, word))
         else:
@@ -331,15 +381,19 @@ def _ruleblock(tokens: _Tokens):
 def _rule(tokens: _Tokens, start) -> Located:
     label = tokens.peek()
     if label[0] not in ("number", "name"):
-        raise KnowledgeError(f"expected the rule's number, found '{label[1]}'", where=tokens.where(label),
-                             fix="number the rule: RULE 1 : IF ... THEN ...;")
+        raise KnowledgeError(
+            f"expected the rule's number, found '{label[1]}'",
+            where=tokens.where(label),
+            fix="number the rule: RULE 1 : IF ... THEN ...;",
+        )
     tokens.take()
     tokens.take(word=":")
     rule = _node(tokens, start)
     if_token = tokens.take(word="IF")
     condition = _clauses(tokens, if_token, "AND")
-    then_token = tokens.take(word="THEN", fix="write IF v IS T AND ... THEN out IS T; (OR, NOT, WITH and "
-                                              "parentheses are not supported)")
+    then_token = tokens.take(
+        word="THEN", fix="write IF v IS T AND ... THEN out IS T; (OR, NOT, WITH and parentheses are not supported)"
+    )
     conclusion = _clauses(tokens, then_token, ",")
     tokens.take(word=";", fix="end the rule with ';' (OR, NOT and WITH are not supported)")
     _put(rule, "if", condition, if_token)
@@ -362,8 +416,9 @@ def _clauses(tokens: _Tokens, start, joiner: str) -> Located:
             raise KnowledgeError("IS NOT is not supported", where=tokens.where(), fix="name the terms it means")
         term = tokens.take("name", fix="write VARIABLE IS TERM")
         if var[1] in clauses:
-            raise KnowledgeError(f"'{var[1]}' appears twice in one rule", where=tokens.where(var),
-                                 fix="a rule tests each variable once")
+            raise KnowledgeError(
+                f"'{var[1]}' appears twice in one rule", where=tokens.where(var), fix="a rule tests each variable once"
+            )
         _put(clauses, var[1], term[1], var)
         if joiner == "AND" and tokens.is_word("AND") or joiner == "," and tokens.peek()[1] == ",":
             tokens.take()
@@ -378,8 +433,9 @@ def load_fcl(path: str | Path) -> Located:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise KnowledgeError(f"cannot read the file ({exc.__class__.__name__})", where=source,
-                             fix="give a readable UTF-8 FCL file") from None
+        raise KnowledgeError(
+            f"cannot read the file ({exc.__class__.__name__})", where=source, fix="give a readable UTF-8 FCL file"
+        ) from None
     return parse_fcl(text, source)
 
 

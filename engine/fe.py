@@ -11,6 +11,7 @@ Every boundary face is a face of exactly one tetrahedron (:func:`tet_boundary`),
 tet's edge mid-nodes; its patch is the mesher's for the same triangle, so a group never names a
 triangle the tets split along the other diagonal.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -25,11 +26,12 @@ from .levels import CORNER, CURVE
 from .mesh import FACES, TetMesh
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 
-TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])   # VTK / meshio / Abaqus C3D10 order
+TET10_EDGES = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])  # VTK / meshio / Abaqus C3D10 order
 # (4, 6) per side k of a tet (FACES[k]): its corners and its edges' mid-nodes, 10-node local indices in triangle6 order
-SIDE_NODES = np.array([[*f, *(4 + TET10_EDGES.tolist().index(sorted((f[i], f[(i + 1) % 3]))) for i in range(3))]
-                       for f in FACES.tolist()])
-BISECTION_STEPS = 8    # the fraction of its curving a mid-edge node keeps is found to 1 / 2**8
+SIDE_NODES = np.array(
+    [[*f, *(4 + TET10_EDGES.tolist().index(sorted((f[i], f[(i + 1) % 3]))) for i in range(3))] for f in FACES.tolist()]
+)
+BISECTION_STEPS = 8  # the fraction of its curving a mid-edge node keeps is found to 1 / 2**8
 
 
 @dataclass
@@ -38,7 +40,7 @@ class Group:
 
     name: str
     dim: int
-    cells: np.ndarray    # (k,) tet indices for dim 3; (k, 3), (k, 2), (k, 1) node indices below
+    cells: np.ndarray  # (k,) tet indices for dim 3; (k, 3), (k, 2), (k, 1) node indices below
 
     @property
     def nodes(self) -> np.ndarray:
@@ -58,7 +60,7 @@ def tet_bodies(mesh: TetMesh, geometry) -> np.ndarray:
     graph = sparse.coo_matrix((np.ones(len(first)), (first, mesh.tets[:, 1:].ravel())), shape=(n, n))
     piece = csgraph.connected_components(graph, directed=False)[1][mesh.tets[:, 0]]
     order = np.lexsort((-mesh.volumes(), piece))
-    largest = order[np.r_[0, np.flatnonzero(np.diff(piece[order])) + 1]]   # per piece, ascending
+    largest = order[np.r_[0, np.flatnonzero(np.diff(piece[order])) + 1]]  # per piece, ascending
     face = geometry.closest_point(mesh.points[mesh.tets[largest]].mean(axis=1))[2]
     return geometry.face_body[face][np.searchsorted(piece[largest], piece)]
 
@@ -100,11 +102,18 @@ def _merge_same_names(groups: list[Group]) -> list[Group]:
     merged: dict = {}
     for group in groups:
         key = (group.name, group.dim)
-        merged[key] = group if key not in merged else Group(group.name, group.dim,
-                                                            np.concatenate([merged[key].cells, group.cells]))
+        merged[key] = (
+            group
+            if key not in merged
+            else Group(group.name, group.dim, np.concatenate([merged[key].cells, group.cells]))
+        )
     names = [name for name, _ in merged]
-    return [g if names.count(g.name) == 1 else Group(f"{g.name}-{('corner', 'curve', 'surface', 'solid')[g.dim]}",
-                                                     g.dim, g.cells) for g in merged.values()]
+    return [
+        g
+        if names.count(g.name) == 1
+        else Group(f"{g.name}-{('corner', 'curve', 'surface', 'solid')[g.dim]}", g.dim, g.cells)
+        for g in merged.values()
+    ]
 
 
 def tet_boundary(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -133,7 +142,7 @@ def tet_boundary(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def side_cells(tets: np.ndarray, owner: np.ndarray, side: np.ndarray) -> np.ndarray:
     """The boundary cells (t, 3) of 4-node ``tets`` or (t, 6) triangle6 of 10-node ``tets`` (m, 10) on
     sides ``side`` of tets ``owner`` (from :func:`tet_boundary`), outward."""
-    return tets[owner[:, None], SIDE_NODES[side, :3 if tets.shape[1] == 4 else 6]]
+    return tets[owner[:, None], SIDE_NODES[side, : 3 if tets.shape[1] == 4 else 6]]
 
 
 def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -161,17 +170,25 @@ def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tup
     # diagonal across a patch from a corner that ends another curve
     corner_of_vertex = {int(v): k for k, v in enumerate(corner_vertex)}
     curves = len(features.curves)
-    end_keys = np.array([corner_of_vertex[int(v)] * curves + index for index, c in enumerate(features.curves)
-                         if c.vertices is not None and len(c.vertices)
-                         for v in (c.vertices[0], c.vertices[-1]) if int(v) in corner_of_vertex], dtype=np.int64)
+    end_keys = np.array(
+        [
+            corner_of_vertex[int(v)] * curves + index
+            for index, c in enumerate(features.curves)
+            if c.vertices is not None and len(c.vertices)
+            for v in (c.vertices[0], c.vertices[-1])
+            if int(v) in corner_of_vertex
+        ],
+        dtype=np.int64,
+    )
     ends_curve = np.isin(entity * curves + curve[:, None], end_keys)
     same = np.where(level == CURVE, entity == curve[:, None], ends_curve)
     keep = (curve >= 0) & same.all(axis=1)
     return edges[keep], curve[keep]
 
 
-def quadratic(mesh: TetMesh, geometry, features,
-              floor: float = QUADRATIC_FLOOR) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def quadratic(
+    mesh: TetMesh, geometry, features, floor: float = QUADRATIC_FLOOR
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
@@ -201,7 +218,7 @@ def quadratic(mesh: TetMesh, geometry, features,
             curved[rows] = onto_intersection(along[c], straight[rows])
         elif features.curves[c].sharp:
             curved[rows] = features.curves[c].point_at(features.curves[c].parameter(straight[rows]))
-        else:                         # a smooth cut's chords are curved onto the surface, like a patch's
+        else:  # a smooth cut's chords are curved onto the surface, like a patch's
             curved[rows] = geometry.closest_point(straight[rows])[0]
     points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10, floor)
     return points, tets10, triangles6
@@ -220,8 +237,9 @@ def quadratic_elements(mesh: TetMesh, boundary: tuple | None = None) -> tuple[np
     return unique, tets10, side_cells(tets10, owner, side)
 
 
-def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
-                  floor: float = QUADRATIC_FLOOR) -> np.ndarray:
+def limit_curving(
+    straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray, floor: float = QUADRATIC_FLOOR
+) -> np.ndarray:
     """Node positions (n, 3) from ``straight`` (n, 3) toward ``curved`` (n, 3) that keep every element of
     ``tets10`` (m, 10) at a scaled Jacobian of at least ``floor`` (straight elements have 1).
 
@@ -245,12 +263,12 @@ def limit_curving(straight: np.ndarray, curved: np.ndarray, tets10: np.ndarray,
         mask[bad[bad >= 0]] = True
         return mask
 
-    near = np.flatnonzero((local[tets10] >= 0).any(axis=1))     # the elements whose shape changes
+    near = np.flatnonzero((local[tets10] >= 0).any(axis=1))  # the elements whose shape changes
     bad = below(fraction, near)
     if not bad.any():
         return curved.copy()
     around = local[tets10[near]]
-    near = near[((around >= 0) & bad[around]).any(axis=1)]      # from here on, only those around nodes cut back
+    near = near[((around >= 0) & bad[around]).any(axis=1)]  # from here on, only those around nodes cut back
     for _ in range(BISECTION_STEPS):
         hi, lo = np.where(bad, fraction, hi), np.where(bad, lo, fraction)
         fraction = (lo + hi) / 2

@@ -8,6 +8,7 @@ bounded by feature curves. Every feature has a stable id (``corner-3``,
 name where a shape or a recognition rule gives one. Curves are parametrised by
 arc length; closed circular curves carry centre, axis and radius.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -54,16 +55,16 @@ class Curve:
     """A polyline on (or, when given by a shape, inside) the solid."""
 
     id: str
-    points: np.ndarray              # (n, 3) ordered; a closed curve does not repeat its first point
+    points: np.ndarray  # (n, 3) ordered; a closed curve does not repeat its first point
     closed: bool
-    vertices: np.ndarray | None     # the surface vertices it runs through, in order (None for a given curve);
-                                    # the points are these but for a smooth cut's zigzag (_unzigzagged)
-    convex: bool | None = None      # None for a given curve
-    dihedral: float | None = None   # median angle between the face normals along it, degrees; None for a given curve
+    vertices: np.ndarray | None  # the surface vertices it runs through, in order (None for a given curve);
+    # the points are these but for a smooth cut's zigzag (_unzigzagged)
+    convex: bool | None = None  # None for a given curve
+    dihedral: float | None = None  # median angle between the face normals along it, degrees; None for a given curve
     circle: Circle | None = None
     names: list[str] = field(default_factory=list)
     on_surface: bool = True
-    sharp: bool = True              # False for borders of face groups that meet smoothly
+    sharp: bool = True  # False for borders of face groups that meet smoothly
     kinds: list[str] = field(default_factory=list)
 
     @property
@@ -110,15 +111,15 @@ class Patch:
     id: str
     faces: np.ndarray
     area: float
-    normal: np.ndarray     # area-weighted mean unit normal
+    normal: np.ndarray  # area-weighted mean unit normal
     centroid: np.ndarray
-    vertices: np.ndarray   # (k, 3) coordinates of the patch's vertices
+    vertices: np.ndarray  # (k, 3) coordinates of the patch's vertices
     planar: bool
     cylinder: Cylinder | None = None
     names: list[str] = field(default_factory=list)
     kinds: list[str] = field(default_factory=list)
-    circle: Circle | None = None    # a toroidal blend's tube (CAD input): its radius is the blend's
-    surface: str | None = None      # the CAD face type (Plane, Cylinder, Torus, BSpline surface, ...), CAD input only
+    circle: Circle | None = None  # a toroidal blend's tube (CAD input): its radius is the blend's
+    surface: str | None = None  # the CAD face type (Plane, Cylinder, Torus, BSpline surface, ...), CAD input only
 
 
 @dataclass
@@ -126,11 +127,11 @@ class Features:
     corners: list[Corner]
     curves: list[Curve]
     patches: list[Patch]
-    face_patch: np.ndarray   # patch index of every surface face
+    face_patch: np.ndarray  # patch index of every surface face
     feature_angle: float
-    lengths: dict = field(default_factory=dict)   # characteristic lengths given by a shape
-    exact: tuple | None = None    # (per patch, per curve) exact surfaces / curves given by the input (CAD), each
-                                  # with .project(points); None: fitted from the facets (engine/exact.py)
+    lengths: dict = field(default_factory=dict)  # characteristic lengths given by a shape
+    exact: tuple | None = None  # (per patch, per curve) exact surfaces / curves given by the input (CAD), each
+    # with .project(points); None: fitted from the facets (engine/exact.py)
 
     def named(self, name: str) -> list:
         """All features carrying ``name``."""
@@ -165,26 +166,37 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     truly_sharp = sharp.copy()
     sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
     patches, face_patch = _patches(geometry, adjacency[~sharp])
-    crease = (face_patch[adjacency[:, 0]] == face_patch[adjacency[:, 1]]) & \
-        (mesh.face_adjacency_angles < CREASE * threshold)
+    crease = (face_patch[adjacency[:, 0]] == face_patch[adjacency[:, 1]]) & (
+        mesh.face_adjacency_angles < CREASE * threshold
+    )
     sharp &= ~crease
     truly_sharp &= ~crease
     closed = np.setdiff1d(np.arange(len(patches)), face_patch[adjacency[sharp]])
-    if len(closed):   # a smooth closed patch (a sphere) is cut in two, so that every patch has a border
+    if len(closed):  # a smooth closed patch (a sphere) is cut in two, so that every patch has a border
         for k, p in enumerate(closed, start=group.max() + 1):
             group[_half(mesh, patches[p].faces)] = k
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
-    pieces = [piece for patch in patches if not patch.planar and patch.cylinder is None
-              for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp, geometry.source)]
+    pieces = [
+        piece
+        for patch in patches
+        if not patch.planar and patch.cylinder is None
+        for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp, geometry.source)
+    ]
     if pieces:
         for k, piece in enumerate(pieces, start=group.max() + 1):
             group[piece] = k
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
     sharp_edges = mesh.face_adjacency_edges[sharp]
-    corners, curves = _curves(mesh.vertices, sharp_edges, mesh.face_adjacency_convex[sharp],
-                              np.degrees(mesh.face_adjacency_angles[sharp]), truly_sharp[sharp], threshold)
+    corners, curves = _curves(
+        mesh.vertices,
+        sharp_edges,
+        mesh.face_adjacency_convex[sharp],
+        np.degrees(mesh.face_adjacency_angles[sharp]),
+        truly_sharp[sharp],
+        threshold,
+    )
     return Features(corners, [c if c.sharp else _unzigzagged(c) for c in curves], patches, face_patch, feature_angle)
 
 
@@ -208,18 +220,17 @@ def _unzigzagged(curve: Curve) -> Curve:
     return replace(curve, points=points) if len(points) < len(curve.points) else curve
 
 
-CREASE = 2.0         # a sharp edge inside one patch below this x the feature angle is a faceting crease
-CHART_CONE = 90.0    # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
-MAX_STRETCH = 1.6    # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
-COPLANAR = 1e-3      # radians: faces meeting at a smaller angle lie in one plane
-WIDE = 3.0           # a coplanar region this many times wider than the facets it bends into is a plane
-MAX_SPLITS = 16      # halvings of a piece's normal spread before it is taken as it is
-SEED_BAND = 0.25     # a halved piece's faces in this top and bottom share of their normals' spread stay apart
-SMOOTHING = 4        # rounds of neighbour averaging of the normals' spread before the seeds are chosen
+CREASE = 2.0  # a sharp edge inside one patch below this x the feature angle is a faceting crease
+CHART_CONE = 90.0  # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
+MAX_STRETCH = 1.6  # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
+COPLANAR = 1e-3  # radians: faces meeting at a smaller angle lie in one plane
+WIDE = 3.0  # a coplanar region this many times wider than the facets it bends into is a plane
+MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
+SEED_BAND = 0.25  # a halved piece's faces in this top and bottom share of their normals' spread stay apart
+SMOOTHING = 4  # rounds of neighbour averaging of the normals' spread before the seeds are chosen
 
 
-def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray,
-                 source: str) -> list[np.ndarray]:
+def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray, source: str) -> list[np.ndarray]:
     """The charts a smooth patch (``faces``) is cut into; one piece when it can be flattened whole.
 
     First its planar regions (coplanar faces, wide against the facets they bend
@@ -260,7 +271,7 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1)
     area = mesh.area_faces
     side, other = bent.ravel(), bent[:, ::-1].ravel()
-    length = np.repeat(length, 2)              # per (face, face it bends into) of side, other
+    length = np.repeat(length, 2)  # per (face, face it bends into) of side, other
     border = np.bincount(region[side], weights=length, minlength=count)
     height = 2 * area[other] / np.maximum(length, 1e-300)
     beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
@@ -292,15 +303,22 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
     while todo:
         piece, depth = todo.pop()
         verts = mesh.vertices[np.unique(mesh.faces[piece])]
-        if len(piece) < 2 or flattenable(mesh, piece) or fit_cylinder(centres[piece], normals[piece], verts) is not None:
+        if (
+            len(piece) < 2
+            or flattenable(mesh, piece)
+            or fit_cylinder(centres[piece], normals[piece], verts) is not None
+        ):
             pieces.append(piece)
             continue
         if depth >= MAX_SPLITS:
             centre = (centres[piece] * mesh.area_faces[piece, None]).sum(axis=0) / mesh.area_faces[piece].sum()
-            raise GeometryError(f"a smooth surface around ({', '.join(f'{x:.4g}' for x in centre)}) cannot be cut "
-                                f"into pieces that flatten ({len(piece)} faces left after {MAX_SPLITS} halvings)",
-                                where=source, fix="lower geometry.feature_angle so that feature curves cut it, or "
-                                                  "re-export the surface with less noise")
+            raise GeometryError(
+                f"a smooth surface around ({', '.join(f'{x:.4g}' for x in centre)}) cannot be cut "
+                f"into pieces that flatten ({len(piece)} faces left after {MAX_SPLITS} halvings)",
+                where=source,
+                fix="lower geometry.feature_angle so that feature curves cut it, or "
+                "re-export the surface with less noise",
+            )
         spread = normals[piece] - normals[piece].mean(axis=0)
         along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
         local = np.full(len(mesh.faces), -1)
@@ -308,7 +326,7 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
         inner = (local[pairs[:, 0]] >= 0) & (local[pairs[:, 1]] >= 0)
         near = sparse.coo_matrix((np.ones(inner.sum()), tuple(local[pairs[inner]].T)), shape=(len(piece),) * 2)
         near = (near + near.T).tocsr()
-        for _ in range(SMOOTHING):   # faceting noise (a quad's two triangles) must not interleave the seeds
+        for _ in range(SMOOTHING):  # faceting noise (a quad's two triangles) must not interleave the seeds
             along = (along + near @ along) / (1.0 + np.asarray(near.sum(axis=1)).ravel())
         along = (along - along.min()) / max(np.ptp(along), 1e-300)
         side = _min_cut(len(piece), local[pairs[inner]], length[inner], along > 1 - SEED_BAND, along < SEED_BAND)
@@ -330,11 +348,11 @@ def _shared_edges(mesh, pairs: np.ndarray) -> np.ndarray:
 def _min_cut(count: int, pairs: np.ndarray, length: np.ndarray, source: np.ndarray, sink: np.ndarray) -> np.ndarray:
     """The nodes on the ``source`` side of a minimum cut (capacities ``length``) of a graph of ``count`` nodes
     joined by ``pairs`` between the ``source`` and the ``sink`` nodes (masks)."""
-    unit = 1e6 / max(length.sum(), 1e-300)          # integer capacities, the whole graph at most ~1e6
+    unit = 1e6 / max(length.sum(), 1e-300)  # integer capacities, the whole graph at most ~1e6
     capacity = np.maximum(1, np.round(length * unit)).astype(np.int32)
     seeds = np.flatnonzero(source)
     drains = np.flatnonzero(sink)
-    big = np.int32(2 ** 30)
+    big = np.int32(2**30)
     rows = np.concatenate([pairs[:, 0], pairs[:, 1], np.full(len(seeds), count), drains])
     cols = np.concatenate([pairs[:, 1], pairs[:, 0], seeds, np.full(len(drains), count + 1)])
     caps = np.concatenate([capacity, capacity, np.full(len(seeds) + len(drains), big, np.int32)])
@@ -425,22 +443,30 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
         normal /= max(np.linalg.norm(normal), 1e-300)
         centroid = (centres[faces] * areas[faces, None]).sum(axis=0) / max(area, 1e-300)
         verts = mesh.vertices[np.unique(mesh.faces[faces])]
-        planar = bool(np.abs((verts - centroid) @ normal).max() <= 1e-9 * geometry.scale
-                      and np.all(normals[faces] @ normal > 1 - 1e-9))
+        planar = bool(
+            np.abs((verts - centroid) @ normal).max() <= 1e-9 * geometry.scale
+            and np.all(normals[faces] @ normal > 1 - 1e-9)
+        )
         cylinder = None if planar else fit_cylinder(centres[faces], normals[faces], verts)
         patches.append(Patch(f"patch-{k}", faces, area, normal, centroid, verts, planar, cylinder))
     return patches, labels
 
 
-def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, dihedral: np.ndarray,
-            truly_sharp: np.ndarray, turn_threshold: float):
+def _curves(
+    vertices: np.ndarray,
+    edges: np.ndarray,
+    convex: np.ndarray,
+    dihedral: np.ndarray,
+    truly_sharp: np.ndarray,
+    turn_threshold: float,
+):
     if len(edges) == 0:
         return [], []
     nv = len(vertices)
     degree = np.bincount(edges.ravel(), minlength=nv)
     corner_mask = (degree > 0) & (degree != 2)
     sharp_degree = np.bincount(edges[truly_sharp].ravel(), minlength=nv)
-    corner_mask |= (degree == 2) & (sharp_degree == 1)    # where a sharp edge goes on as a smooth cut
+    corner_mask |= (degree == 2) & (sharp_degree == 1)  # where a sharp edge goes on as a smooth cut
     # a sharp chain turning by more than the feature angle has a corner there; a smooth cut follows
     # the input's edges, whose zigzag is no corner
     corner_mask |= _sharp_turns(vertices, edges[truly_sharp], sharp_degree, turn_threshold) & (degree == 2)
@@ -462,8 +488,16 @@ def _curves(vertices: np.ndarray, edges: np.ndarray, convex: np.ndarray, dihedra
     for k in range(count):
         members = np.flatnonzero(edge_curve == k)
         ordered, closed = _order_chain(edges[members], corner_mask)
-        raw.append((int(min(ordered)), ordered, closed, bool(np.mean(convex[members]) >= 0.5),
-                    float(np.median(dihedral[members])), bool(np.mean(truly_sharp[members]) >= 0.5)))
+        raw.append(
+            (
+                int(min(ordered)),
+                ordered,
+                closed,
+                bool(np.mean(convex[members]) >= 0.5),
+                float(np.median(dihedral[members])),
+                bool(np.mean(truly_sharp[members]) >= 0.5),
+            )
+        )
     raw.sort(key=lambda item: item[0])
     curves = []
     for i, (_, ordered, closed, is_convex, angle, is_sharp) in enumerate(raw):
@@ -504,9 +538,9 @@ def _order_chain(chain_edges: np.ndarray, corner_mask: np.ndarray):
     graph = graph + graph.T
     ends = np.flatnonzero(corner_mask[local])
     local_degree = np.diff(graph.indptr)
-    if len(ends) == 0:                 # a loop without corners
+    if len(ends) == 0:  # a loop without corners
         start, closed = int(np.argmin(local)), True
-    elif len(ends) == 1 and local_degree[ends[0]] == 2:   # a loop through one corner
+    elif len(ends) == 1 and local_degree[ends[0]] == 2:  # a loop through one corner
         start, closed = int(ends[0]), True
     else:
         start, closed = int(ends[np.argmin(local[ends])]), False
@@ -524,9 +558,9 @@ def fit_circle(points: np.ndarray) -> Circle | None:
     if np.abs((points - centre0) @ axis).max() > CIRCLE_TOLERANCE * np.ptp(xy):
         return None
     A = np.column_stack([2 * xy, np.ones(len(xy))])
-    rhs = (xy ** 2).sum(axis=1)
+    rhs = (xy**2).sum(axis=1)
     (cx, cy, c), *_ = np.linalg.lstsq(A, rhs, rcond=None)
-    radius = float(np.sqrt(c + cx ** 2 + cy ** 2))
+    radius = float(np.sqrt(c + cx**2 + cy**2))
     deviation = np.abs(np.linalg.norm(xy - [cx, cy], axis=1) - radius).max()
     if len(points) < 6 or deviation > CIRCLE_TOLERANCE * radius:
         return None
@@ -570,8 +604,8 @@ def fit_circle_projected(points: np.ndarray, axis: np.ndarray):
     origin = points.mean(axis=0)
     xy = np.column_stack([(points - origin) @ u, (points - origin) @ v])
     A = np.column_stack([2 * xy, np.ones(len(xy))])
-    (cx, cy, c), *_ = np.linalg.lstsq(A, (xy ** 2).sum(axis=1), rcond=None)
-    radius = float(np.sqrt(max(c + cx ** 2 + cy ** 2, 0.0)))
+    (cx, cy, c), *_ = np.linalg.lstsq(A, (xy**2).sum(axis=1), rcond=None)
+    radius = float(np.sqrt(max(c + cx**2 + cy**2, 0.0)))
     if radius == 0 or np.abs(np.linalg.norm(xy - [cx, cy], axis=1) - radius).max() > CIRCLE_TOLERANCE * radius:
         return None
     return origin + cx * u + cy * v, radius
@@ -610,8 +644,14 @@ def apply_names(features: Features, rules, given_curves=()) -> Features:
             if rule.name not in feature.names and rule.test(feature):
                 feature.names.append(rule.name)
     for given in given_curves:
-        curve = Curve(f"curve-{len(features.curves)}", np.asarray(given.points, float), given.closed, None,
-                      names=[given.name], on_surface=False)
+        curve = Curve(
+            f"curve-{len(features.curves)}",
+            np.asarray(given.points, float),
+            given.closed,
+            None,
+            names=[given.name],
+            on_surface=False,
+        )
         if given.closed:
             curve.circle = fit_circle(curve.points)
         features.curves.append(curve)
@@ -619,6 +659,7 @@ def apply_names(features: Features, rules, given_curves=()) -> Features:
 
 
 # ------------------------------------------------------------------ naming features in messages
+
 
 def centroid(feature) -> np.ndarray:
     """A corner's point, a curve's centroid (by length along it), a patch's area centroid."""

@@ -6,19 +6,21 @@ are clipped to their variable's universe. A rule base evaluates arrays of any
 length at once and returns every rule's firing degree per input, so callers
 can log which rule acted and how strongly.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ._numba import numba
 import numpy as np
 import skfuzzy
+
+from ._numba import numba
 
 
 @dataclass(frozen=True)
 class Term:
     name: str
-    points: tuple[float, float, float, float]   # trapezoid a <= b <= c <= d
+    points: tuple[float, float, float, float]  # trapezoid a <= b <= c <= d
 
     def membership(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=float)
@@ -30,7 +32,7 @@ class Variable:
     name: str
     universe: tuple[float, float]
     terms: dict[str, Term]
-    default: float | None = None      # outputs only: the value when no rule fires
+    default: float | None = None  # outputs only: the value when no rule fires
 
     def clip(self, x: np.ndarray) -> np.ndarray:
         return np.clip(np.asarray(x, dtype=float), *self.universe)
@@ -39,9 +41,9 @@ class Variable:
 @dataclass(frozen=True)
 class Rule:
     id: str
-    conditions: tuple[tuple[str, str], ...]    # (input variable, term), joined by AND
-    conclusions: tuple[tuple[str, str], ...]   # (output variable, term)
-    source: str = ""                           # file:line
+    conditions: tuple[tuple[str, str], ...]  # (input variable, term), joined by AND
+    conclusions: tuple[tuple[str, str], ...]  # (output variable, term)
+    source: str = ""  # file:line
 
 
 @dataclass
@@ -50,7 +52,7 @@ class RuleBase:
     inputs: dict[str, Variable]
     outputs: dict[str, Variable]
     rules: list[Rule]
-    resolution: int = 101                      # samples of each output universe for the centroid
+    resolution: int = 101  # samples of each output universe for the centroid
     source: str = ""
     extra: dict = field(default_factory=dict)  # other sections of the file (e.g. actions)
 

@@ -5,6 +5,7 @@ refuses anything that is not a valid solid with one clear line.
 :class:`Geometry` answers the vectorised queries the other stages need:
 inside test, closest point on the surface, signed distance (positive inside).
 """
+
 from __future__ import annotations
 
 import logging
@@ -22,7 +23,7 @@ from .inside import InsideGrid
 log = logging.getLogger(__name__)
 
 SURFACE_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".off": "off", ".glb": "glb"}
-TOUCH = 1e-9   # two shells closer than this times the model size touch
+TOUCH = 1e-9  # two shells closer than this times the model size touch
 
 
 @dataclass
@@ -31,7 +32,7 @@ class Geometry:
 
     mesh: trimesh.Trimesh
     source: str
-    face_body: np.ndarray   # the body (separate solid, 0-based) each face bounds; a cavity's is the solid around it
+    face_body: np.ndarray  # the body (separate solid, 0-based) each face bounds; a cavity's is the solid around it
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -65,16 +66,17 @@ class Geometry:
 
     @cached_property
     def _igl_arrays(self):
-        return (np.ascontiguousarray(self.mesh.vertices, dtype=np.float64),
-                np.ascontiguousarray(self.mesh.faces, dtype=np.int64))
+        return (
+            np.ascontiguousarray(self.mesh.vertices, dtype=np.float64),
+            np.ascontiguousarray(self.mesh.faces, dtype=np.int64),
+        )
 
     def _query(self, points: np.ndarray):
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         V, F = self._igl_arrays
         if len(points) == 0:
             return np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3))
-        dist, face, closest, _ = igl.signed_distance(
-            points, V, F, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)
+        dist, face, closest, _ = igl.signed_distance(points, V, F, sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)
         return -dist, face, closest
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
@@ -105,8 +107,11 @@ def load_surface(path: str | Path, *, allow_multiple_solids: bool = False) -> Ge
     source = str(path)
     suffix = path.suffix.lower()
     if suffix not in SURFACE_FORMATS:
-        raise GeometryError(f"unknown surface format '{path.suffix or '(none)'}'", where=source,
-                            fix=f"give one of: {', '.join(sorted(SURFACE_FORMATS))}")
+        raise GeometryError(
+            f"unknown surface format '{path.suffix or '(none)'}'",
+            where=source,
+            fix=f"give one of: {', '.join(sorted(SURFACE_FORMATS))}",
+        )
     if not path.is_file():
         raise GeometryError("file not found", where=source, fix="check the path")
     if path.stat().st_size == 0:
@@ -115,16 +120,21 @@ def load_surface(path: str | Path, *, allow_multiple_solids: bool = False) -> Ge
         loaded = trimesh.load(str(path), file_type=SURFACE_FORMATS[suffix], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for broken files
         detail = "" if isinstance(exc, ImportError) else f" ({exc.__class__.__name__}: {exc})"
-        raise GeometryError(f"not a readable {suffix[1:].upper()} surface{detail}",
-                            where=source, fix="check that the file is a valid surface mesh") from None
+        raise GeometryError(
+            f"not a readable {suffix[1:].upper()} surface{detail}",
+            where=source,
+            fix="check that the file is a valid surface mesh",
+        ) from None
     if not isinstance(loaded, trimesh.Trimesh):
-        raise GeometryError("the file holds no triangle surface", where=source,
-                            fix="export the solid's boundary as triangles")
+        raise GeometryError(
+            "the file holds no triangle surface", where=source, fix="export the solid's boundary as triangles"
+        )
     return validate_surface(loaded.vertices, loaded.faces, source, allow_multiple_solids=allow_multiple_solids)
 
 
-def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: bool = False,
-                     check_self_intersections: bool = True) -> Geometry:
+def validate_surface(
+    vertices, faces, source: str, *, allow_multiple_solids: bool = False, check_self_intersections: bool = True
+) -> Geometry:
     """Build a :class:`Geometry` from raw arrays, or raise a one-line GeometryError.
 
     Refused: no triangles, NaN/inf coordinates, open or non-manifold surface,
@@ -140,8 +150,11 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
     bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
-        raise GeometryError(f"{int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex {first})",
-                            where=source, fix="repair or re-export the surface")
+        raise GeometryError(
+            f"{int(bad.sum())} vertices have NaN or infinite coordinates (first: vertex {first})",
+            where=source,
+            fix="repair or re-export the surface",
+        )
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     mesh.merge_vertices()
     degenerate = ~mesh.nondegenerate_faces(height=1e-12 * max(mesh.scale, 1e-300))
@@ -150,8 +163,9 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
         mesh.remove_unreferenced_vertices()
         notes.append(f"removed {int(degenerate.sum())} degenerate (zero-area) faces")
     if len(mesh.faces) == 0:
-        raise GeometryError("the surface has no triangles of non-zero area", where=source,
-                            fix="export the solid's boundary")
+        raise GeometryError(
+            "the surface has no triangles of non-zero area", where=source, fix="export the solid's boundary"
+        )
     _check_closed(mesh, source)
     notes += _make_consistent(mesh, source)
     face_shell, depth, shell_body = _shells(mesh, source)
@@ -160,9 +174,12 @@ def validate_surface(vertices, faces, source: str, *, allow_multiple_solids: boo
     notes += _orient(mesh, source, face_shell, depth, allow_multiple_solids)
     with np.errstate(divide="ignore", invalid="ignore"):
         volume = float(mesh.volume)
-    if not volume > 1e-9 * mesh.scale ** 3:
-        raise GeometryError(f"the surface encloses no volume ({volume:.3g})", where=source,
-                            fix="give a solid body, not a sheet or a degenerate surface")
+    if not volume > 1e-9 * mesh.scale**3:
+        raise GeometryError(
+            f"the surface encloses no volume ({volume:.3g})",
+            where=source,
+            fix="give a solid body, not a sheet or a degenerate surface",
+        )
     for note in notes:
         log.warning("%s: %s", source, note)
     return Geometry(mesh, source, shell_body[face_shell], notes)
@@ -174,16 +191,23 @@ def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:
     open_edges = int((counts == 1).sum())
     nonmanifold = int((counts > 2).sum())
     if open_edges:
-        raise GeometryError(f"the surface is not closed (not watertight): {open_edges} edges bound a hole",
-                            where=source, fix="close the holes in the CAD tool or a mesh repair tool")
+        raise GeometryError(
+            f"the surface is not closed (not watertight): {open_edges} edges bound a hole",
+            where=source,
+            fix="close the holes in the CAD tool or a mesh repair tool",
+        )
     if nonmanifold:
-        raise GeometryError(f"the surface is not manifold: {nonmanifold} edges are shared by more than two faces",
-                            where=source, fix="repair the surface so that each edge joins exactly two faces "
-                                                "(bodies that touch along an edge share it: move them apart)")
+        raise GeometryError(
+            f"the surface is not manifold: {nonmanifold} edges are shared by more than two faces",
+            where=source,
+            fix="repair the surface so that each edge joins exactly two faces "
+            "(bodies that touch along an edge share it: move them apart)",
+        )
 
 
-def _check_self_intersections(mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray,
-                              shell_body: np.ndarray) -> None:
+def _check_self_intersections(
+    mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray, shell_body: np.ndarray
+) -> None:
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
@@ -194,8 +218,11 @@ def _check_self_intersections(mesh: trimesh.Trimesh, source: str, face_shell: np
     if len(shells) > 1:
         raise _touch_error(source, shell_body, shells[0], shells[1])
     if len(shells):
-        raise GeometryError(f"the surface intersects itself ({int(selected.sum())} faces cross other faces)",
-                            where=source, fix="union the overlapping bodies or repair the surface")
+        raise GeometryError(
+            f"the surface intersects itself ({int(selected.sum())} faces cross other faces)",
+            where=source,
+            fix="union the overlapping bodies or repair the surface",
+        )
 
 
 def _make_consistent(mesh: trimesh.Trimesh, source: str) -> list[str]:
@@ -204,8 +231,9 @@ def _make_consistent(mesh: trimesh.Trimesh, source: str) -> list[str]:
         return []
     trimesh.repair.fix_winding(mesh)
     if not mesh.is_winding_consistent:
-        raise GeometryError("the surface cannot be oriented consistently (non-orientable)",
-                            where=source, fix="repair the surface")
+        raise GeometryError(
+            "the surface cannot be oriented consistently (non-orientable)", where=source, fix="repair the surface"
+        )
     return ["fixed inconsistent face orientation"]
 
 
@@ -235,7 +263,7 @@ def _shells(mesh: trimesh.Trimesh, source: str):
     boxes_meet = ((lo[:, None] <= hi[None] + tol) & (lo[None] <= hi[:, None] + tol)).all(axis=2)
     pairs = np.argwhere(np.triu(boxes_meet, 1))
     shells = {k: _Shell(V, F[face_shell == k]) for k in np.unique(pairs)}
-    inside = np.zeros((count, count), dtype=bool)   # inside[a, b]: shell a lies inside shell b
+    inside = np.zeros((count, count), dtype=bool)  # inside[a, b]: shell a lies inside shell b
     touching = []
     for i, j in pairs:
         for a, b in ((i, j), (j, i)):
@@ -245,7 +273,7 @@ def _shells(mesh: trimesh.Trimesh, source: str):
                 touching.append((i, j))
     depth = inside.sum(axis=1)
     outer = depth % 2 == 0
-    around = np.argmax(inside & (depth[None, :] == depth[:, None] - 1), axis=1)   # a cavity's shell around it
+    around = np.argmax(inside & (depth[None, :] == depth[:, None] - 1), axis=1)  # a cavity's shell around it
     shell_body = (np.cumsum(outer) - 1)[np.where(outer, np.arange(count), around)]
     if touching:
         raise _touch_error(source, shell_body, *touching[0])
@@ -263,8 +291,11 @@ class _Shell:
         self.sign = -1.0 if np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) > 0 else 1.0
         # the grid's few free regions by winding number: a region's cell centre may lie far from every face,
         # where the closest-point search would visit them all (the centre of a sphere)
-        self.grid = InsideGrid(self.points, self.faces, lambda centres: np.abs(
-            [winding_number(self.points[self.faces], centre) for centre in centres]) > 0.5)
+        self.grid = InsideGrid(
+            self.points,
+            self.faces,
+            lambda centres: np.abs([winding_number(self.points[self.faces], centre) for centre in centres]) > 0.5,
+        )
 
     def classify(self, points: np.ndarray, tol: float):
         """(inside or on, on: within ``tol``) for every point; exact (signed distance) in the grid's cells
@@ -274,8 +305,15 @@ class _Shell:
         on = np.zeros(len(points), dtype=bool)
         near = np.flatnonzero(region == 0)
         if len(near):
-            distance = self.sign * igl.signed_distance(np.ascontiguousarray(points[near]), self.points, self.faces,
-                                                       sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL)[0]
+            distance = (
+                self.sign
+                * igl.signed_distance(
+                    np.ascontiguousarray(points[near]),
+                    self.points,
+                    self.faces,
+                    sign_type=igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL,
+                )[0]
+            )
             within[near] = distance > -tol
             on[near] = np.abs(distance) <= tol
         return within, on
@@ -286,8 +324,12 @@ def winding_number(triangles: np.ndarray, point: np.ndarray) -> float:
     a, b, c = (triangles[:, k] - point for k in range(3))
     la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
     det = np.einsum("ij,ij->i", a, np.cross(b, c))
-    dot = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la
-           + np.einsum("ij,ij->i", c, a) * lb)
+    dot = (
+        la * lb * lc
+        + np.einsum("ij,ij->i", a, b) * lc
+        + np.einsum("ij,ij->i", b, c) * la
+        + np.einsum("ij,ij->i", c, a) * lb
+    )
     return float(np.arctan2(det, dot).sum() / (2 * np.pi))
 
 
@@ -297,14 +339,21 @@ def _touch_error(source: str, shell_body: np.ndarray, i: int, j: int) -> Geometr
     held = f"the surface holds {count} {'body' if count == 1 else 'bodies'}"
     a, b = sorted((int(shell_body[i]) + 1, int(shell_body[j]) + 1))
     if a == b:
-        return GeometryError(f"{held} and two shells of body {a} (its outer surface and a cavity, or two cavities) "
-                             "touch or overlap", where=source, fix="move the cavity clear of the other shell")
-    return GeometryError(f"{held} and bodies {a} and {b} touch or overlap", where=source,
-                         fix="move them apart, or unite them into one solid in the CAD tool")
+        return GeometryError(
+            f"{held} and two shells of body {a} (its outer surface and a cavity, or two cavities) touch or overlap",
+            where=source,
+            fix="move the cavity clear of the other shell",
+        )
+    return GeometryError(
+        f"{held} and bodies {a} and {b} touch or overlap",
+        where=source,
+        fix="move them apart, or unite them into one solid in the CAD tool",
+    )
 
 
-def _orient(mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray, depth: np.ndarray,
-            allow_multiple_solids: bool) -> list[str]:
+def _orient(
+    mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray, depth: np.ndarray, allow_multiple_solids: bool
+) -> list[str]:
     """Orient every shell outward (cavities, at odd depth, inward); count solids. Mutates ``mesh``."""
     notes = []
     tri = np.asarray(mesh.vertices, dtype=np.float64)[mesh.faces]
@@ -317,6 +366,9 @@ def _orient(mesh: trimesh.Trimesh, source: str, face_shell: np.ndarray, depth: n
         notes.append(f"turned {int(flip.sum())} inside-out shell(s) the right way round")
     solids = int((depth % 2 == 0).sum())
     if solids > 1 and not allow_multiple_solids:
-        raise GeometryError(f"the surface holds {solids} disconnected solids", where=source,
-                            fix="mesh them one at a time, or set 'allow_multiple_solids: true' in the job's geometry")
+        raise GeometryError(
+            f"the surface holds {solids} disconnected solids",
+            where=source,
+            fix="mesh them one at a time, or set 'allow_multiple_solids: true' in the job's geometry",
+        )
     return notes

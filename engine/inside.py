@@ -8,6 +8,7 @@ touch, so each region is wholly inside or outside: one exact test per region
 classifies it. A query point in an unmarked cell is answered by a lookup; one
 in a marked cell by the exact test.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,8 +35,13 @@ class InsideGrid:
         self.exact = exact
 
         marked = np.zeros(self.shape, dtype=bool)
-        _mark_cells(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64),
-                    self.origin, cell, marked)
+        _mark_cells(
+            np.ascontiguousarray(vertices, dtype=np.float64),
+            np.ascontiguousarray(faces, dtype=np.int64),
+            self.origin,
+            cell,
+            marked,
+        )
         labels, count = ndimage.label(~marked)
         # one representative cell centre per free region, classified exactly (any of its cells will do)
         representative = np.zeros(count + 1, dtype=np.int64)
@@ -58,7 +64,7 @@ class InsideGrid:
     def contains(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         region = self.region(points)
-        result = self.region_inside[np.maximum(region, 0)]   # region 0 is not inside: decided below
+        result = self.region_inside[np.maximum(region, 0)]  # region 0 is not inside: decided below
         undecided = region == 0
         if undecided.any():
             result[undecided] = self.exact(points[undecided])

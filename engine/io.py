@@ -1,4 +1,5 @@
 """Writing meshes through meshio, atomically (temporary file + rename)."""
+
 from __future__ import annotations
 
 import json
@@ -13,7 +14,7 @@ from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
 from .mesh import TetMesh
 from .topology import face_owners
 
-ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}   # C3D4/C3D10 face by the local index of the opposite node
+ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}  # C3D4/C3D10 face by the local index of the opposite node
 
 
 @dataclass
@@ -21,14 +22,14 @@ class FEModel:
     """What the files hold: nodes, linear or quadratic tets, the boundary and the named groups."""
 
     points: np.ndarray
-    tets: np.ndarray              # (m, 4) or (m, 10)
-    boundary: np.ndarray          # (t, 3) or (t, 6): the tets' own faces, outward (engine.fe.tet_boundary)
-    node_level: np.ndarray        # -1 for mid-edge nodes
+    tets: np.ndarray  # (m, 4) or (m, 10)
+    boundary: np.ndarray  # (t, 3) or (t, 6): the tets' own faces, outward (engine.fe.tet_boundary)
+    node_level: np.ndarray  # -1 for mid-edge nodes
     node_entity: np.ndarray
     groups: list = field(default_factory=list)
-    cell_data: dict = field(default_factory=dict)    # per element (the audit)
-    point_data: dict = field(default_factory=dict)   # per node (the audit; -1 / 0 on mid-edge nodes)
-    legend: dict | None = None                       # the audit legend, written as <name>.audit.json
+    cell_data: dict = field(default_factory=dict)  # per element (the audit)
+    point_data: dict = field(default_factory=dict)  # per node (the audit; -1 / 0 on mid-edge nodes)
+    legend: dict | None = None  # the audit legend, written as <name>.audit.json
 
     @staticmethod
     def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
@@ -42,8 +43,17 @@ class FEModel:
             return np.r_[values, np.full(extra, -1 if values.dtype.kind in "iu" else 0, dtype=values.dtype)]
 
         point_data = {k: pad(v) for k, v in audit.nodes.items()} if audit else {}
-        return FEModel(points, tets, boundary, pad(mesh.node_level), pad(mesh.node_entity), list(groups),
-                       dict(audit.cells) if audit else {}, point_data, audit.legend if audit else None)
+        return FEModel(
+            points,
+            tets,
+            boundary,
+            pad(mesh.node_level),
+            pad(mesh.node_entity),
+            list(groups),
+            dict(audit.cells) if audit else {},
+            point_data,
+            audit.legend if audit else None,
+        )
 
     @property
     def quadratic(self) -> bool:
@@ -57,8 +67,12 @@ def to_meshio(model: FEModel, audit: bool = False) -> meshio.Mesh:
     if audit:
         point_data.update(model.point_data)
         cell_data = {name: [values] for name, values in model.cell_data.items()}
-    return meshio.Mesh(model.points, [("tetra10" if model.quadratic else "tetra", model.tets.astype(np.int64))],
-                       point_data=point_data, cell_data=cell_data)
+    return meshio.Mesh(
+        model.points,
+        [("tetra10" if model.quadratic else "tetra", model.tets.astype(np.int64))],
+        point_data=point_data,
+        cell_data=cell_data,
+    )
 
 
 def to_med(model: FEModel) -> meshio.Mesh:
@@ -70,7 +84,7 @@ def to_med(model: FEModel) -> meshio.Mesh:
         for k, group in enumerate(solids):
             member[group.cells, k] = True
         combinations, family = np.unique(member, axis=0, return_inverse=True)
-        data.cell_data["cell_tags"] = [-1 - family.ravel()]   # element families are numbered from -1 down
+        data.cell_data["cell_tags"] = [-1 - family.ravel()]  # element families are numbered from -1 down
         data.cell_tags = {-1 - f: [g.name for g, m in zip(solids, row) if m] for f, row in enumerate(combinations)}
     return data
 
@@ -78,8 +92,12 @@ def to_med(model: FEModel) -> meshio.Mesh:
 def to_gmsh(model: FEModel) -> meshio.Mesh:
     """Tets and every group's cells, tagged with its physical group (named in field_data)."""
     q = model.quadratic
-    kinds = {3: "tetra10" if q else "tetra", 2: "triangle6" if q else "triangle", 1: "line3" if q else "line",
-             0: "vertex"}
+    kinds = {
+        3: "tetra10" if q else "tetra",
+        2: "triangle6" if q else "triangle",
+        1: "line3" if q else "line",
+        0: "vertex",
+    }
     cells, physical, field_data = [], [], {}
     for tag, group in enumerate(model.groups or [], start=1):
         data = model.tets[group.cells] if group.dim == 3 else _group_cells(model, group)
@@ -88,9 +106,13 @@ def to_gmsh(model: FEModel) -> meshio.Mesh:
         field_data[group.name] = np.array([tag, group.dim])
     if not cells:
         cells, physical = [(kinds[3], model.tets.astype(np.int64))], [np.ones(len(model.tets), np.int32)]
-    return meshio.Mesh(model.points, cells, cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
-                       field_data=field_data, point_data={"node_level": model.node_level.astype(np.int32),
-                                                          "node_entity": model.node_entity.astype(np.int32)})
+    return meshio.Mesh(
+        model.points,
+        cells,
+        cell_data={"gmsh:physical": physical, "gmsh:geometrical": physical},
+        field_data=field_data,
+        point_data={"node_level": model.node_level.astype(np.int32), "node_entity": model.node_entity.astype(np.int32)},
+    )
 
 
 def _group_cells(model: FEModel, group) -> np.ndarray:
@@ -122,7 +144,7 @@ def write_abaqus(path, model: FEModel) -> None:
             elements = owner[opposite == local] + 1
             if len(elements):
                 lines.append(f"*ELSET, ELSET=_{name}_{face}, INTERNAL")
-                lines += [",".join(map(str, elements[i:i + 16])) for i in range(0, len(elements), 16)]
+                lines += [",".join(map(str, elements[i : i + 16])) for i in range(0, len(elements), 16)]
         lines.append(f"*SURFACE, TYPE=ELEMENT, NAME={name}")
         lines += [f"_{name}_{face}, {face}" for local, face in ABAQUS_FACE.items() if (opposite == local).any()]
     with open(path, "a") as handle:
@@ -138,8 +160,10 @@ def write_nastran(path, model: FEModel) -> None:
     ids = np.arange(1, len(model.points) + 1)
     with open(path, "w") as handle:
         handle.write("$ written by fuzzymesh\nBEGIN BULK\n")
-        handle.writelines(f"GRID*   {i:>16d}{0:>16d}{x:>16.9E}{y:>16.9E}\n*       {z:>16.9E}\n"
-                          for i, (x, y, z) in zip(ids.tolist(), model.points.tolist()))
+        handle.writelines(
+            f"GRID*   {i:>16d}{0:>16d}{x:>16.9E}{y:>16.9E}\n*       {z:>16.9E}\n"
+            for i, (x, y, z) in zip(ids.tolist(), model.points.tolist())
+        )
         nodes = model.tets + 1
         for e, row in enumerate(nodes.tolist(), start=1):
             head = "".join(f"{n:>8d}" for n in row[:6])
@@ -155,13 +179,19 @@ def _abaqus_name(name: str) -> str:
 def mesh_targets(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Target]:
     """The files of ``model``: ``directory/name.<format>`` for each format and the audit legend
     ``name.audit.json``, as (path, write) targets for :func:`engine.atomic.write_all_or_nothing`."""
-    writers = {"vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
-               "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
-               "inp": lambda tmp: write_abaqus(tmp, model),
-               "bdf": lambda tmp: write_nastran(tmp, model),
-               "med": lambda tmp: meshio.write(tmp, to_med(model), file_format="med")}
+    writers = {
+        "vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
+        "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
+        "inp": lambda tmp: write_abaqus(tmp, model),
+        "bdf": lambda tmp: write_nastran(tmp, model),
+        "med": lambda tmp: meshio.write(tmp, to_med(model), file_format="med"),
+    }
     targets = [(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats]
     if model.legend is not None:
-        targets.append((Path(directory) / f"{name}.audit.json",
-                        lambda tmp: Path(tmp).write_text(json.dumps(model.legend, indent=1))))
+        targets.append(
+            (
+                Path(directory) / f"{name}.audit.json",
+                lambda tmp: Path(tmp).write_text(json.dumps(model.legend, indent=1)),
+            )
+        )
     return targets

@@ -4,6 +4,7 @@ A job is YAML (or a dict) with the keys of :data:`JOB_SCHEMA`; see
 ``docs/job.md``. Unknown keys and wrong types are errors naming file:line and
 the allowed keys. Paths in a job file are relative to the job file.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -35,35 +36,64 @@ def _formats_ok(value):
 
 def job_schema() -> dict:
     return {
-        "geometry": Field(MAPPING, required=True, doc="what to mesh: 'shape' (+ 'parameters') or 'file'", fields={
-            "shape": Field(STRING, choices=tuple(SHAPES), doc="a built-in parametric solid"),
-            "parameters": Field(MAPPING, default={}, open_keys=True, doc="the shape's parameters"),
-            "file": Field(STRING, doc="an STL, OBJ, PLY, OFF or GLB surface or a STEP, IGES or BREP "
-                                       "model, relative to the job file"),
-            "allow_multiple_solids": Field(BOOLEAN, default=False, doc="accept several disconnected solids"),
-            "feature_angle": Field(NUMBER, default=30.0, check=in_range(0.0, 180.0),
-                                   doc="dihedral angle in degrees above which an edge is a feature edge"),
-        }),
-        "size": Field(NUMBER, check=positive,
-                      doc="global element size H, in model units (default: model size / 40)"),
+        "geometry": Field(
+            MAPPING,
+            required=True,
+            doc="what to mesh: 'shape' (+ 'parameters') or 'file'",
+            fields={
+                "shape": Field(STRING, choices=tuple(SHAPES), doc="a built-in parametric solid"),
+                "parameters": Field(MAPPING, default={}, open_keys=True, doc="the shape's parameters"),
+                "file": Field(
+                    STRING,
+                    doc="an STL, OBJ, PLY, OFF or GLB surface or a STEP, IGES or BREP model, relative to the job file",
+                ),
+                "allow_multiple_solids": Field(BOOLEAN, default=False, doc="accept several disconnected solids"),
+                "feature_angle": Field(
+                    NUMBER,
+                    default=30.0,
+                    check=in_range(0.0, 180.0),
+                    doc="dihedral angle in degrees above which an edge is a feature edge",
+                ),
+            },
+        ),
+        "size": Field(NUMBER, check=positive, doc="global element size H, in model units (default: model size / 40)"),
         "min_size": Field(NUMBER, check=positive, doc="no element size below this"),
         "max_size": Field(NUMBER, check=positive, doc="no element size above this"),
         "recipe": Field(STRING, doc="a curated recipe (fuzzymesh recipes list)"),
         "place": Field(LIST, default=[], doc="pattern placements (see docs/rules.md)"),
-        "knowledge": Field(LIST, default=[], items=Field(STRING),
-                           doc="extra rule/pattern/recipe files or folders, relative to the job file"),
+        "knowledge": Field(
+            LIST,
+            default=[],
+            items=Field(STRING),
+            doc="extra rule/pattern/recipe files or folders, relative to the job file",
+        ),
         "packer": Field(STRING, default="bubble", choices=tuple(packer_names()), doc="node placement method"),
         "mesher": Field(STRING, default="delaunay", choices=tuple(mesher_names()), doc="connection method"),
-        "seed": Field(INTEGER, default=0, check=non_negative,
-                      doc="random seed >= 0; same input and seed give the same mesh"),
-        "output": Field(MAPPING, default=None, doc="where and what to write", fields={
-            "directory": Field(STRING, default="out", doc="output folder, relative to the job file"),
-            "name": Field(STRING, default="mesh", check=_plain_name, doc="base name of the mesh files"),
-            "formats": Field(LIST, default=["vtu", "msh"], items=Field(STRING), check=_formats_ok,
-                             doc=f"any of {', '.join(OUTPUT_FORMATS)}"),
-            "order": Field(INTEGER, default=1, choices=(1, 2),
-                           doc="element order: 1 (4-node tets) or 2 (10-node tets, boundary on the surface)"),
-        }),
+        "seed": Field(
+            INTEGER, default=0, check=non_negative, doc="random seed >= 0; same input and seed give the same mesh"
+        ),
+        "output": Field(
+            MAPPING,
+            default=None,
+            doc="where and what to write",
+            fields={
+                "directory": Field(STRING, default="out", doc="output folder, relative to the job file"),
+                "name": Field(STRING, default="mesh", check=_plain_name, doc="base name of the mesh files"),
+                "formats": Field(
+                    LIST,
+                    default=["vtu", "msh"],
+                    items=Field(STRING),
+                    check=_formats_ok,
+                    doc=f"any of {', '.join(OUTPUT_FORMATS)}",
+                ),
+                "order": Field(
+                    INTEGER,
+                    default=1,
+                    choices=(1, 2),
+                    doc="element order: 1 (4-node tets) or 2 (10-node tets, boundary on the surface)",
+                ),
+            },
+        ),
     }
 
 
@@ -71,8 +101,8 @@ def job_schema() -> dict:
 class Job:
     """A validated job."""
 
-    source: str                 # job file path or '<dict>'
-    base_dir: Path              # relative paths resolve against this
+    source: str  # job file path or '<dict>'
+    base_dir: Path  # relative paths resolve against this
     shape: str | None
     shape_parameters: dict
     geometry_file: Path | None
@@ -118,8 +148,11 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
     values = validate(data, job_schema(), JobError)
     geo, geo_raw = values["geometry"], data["geometry"]
     if (geo["shape"] is None) == (geo["file"] is None):
-        raise JobError("'geometry' needs exactly one of 'shape' or 'file'", where=geo_raw.where(),
-                       fix=f"e.g. 'shape: plate_cylinder_junction' (shapes: {', '.join(SHAPES)})")
+        raise JobError(
+            "'geometry' needs exactly one of 'shape' or 'file'",
+            where=geo_raw.where(),
+            fix=f"e.g. 'shape: plate_cylinder_junction' (shapes: {', '.join(SHAPES)})",
+        )
     parameters = {}
     if geo["shape"] is not None:
         _, schema = SHAPES[geo["shape"]]
@@ -128,28 +161,48 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
             raw_params = located(raw_params, source)
         parameters = validate(raw_params, schema, JobError, f"geometry.parameters ({geo['shape']})")
     elif geo["parameters"]:
-        raise JobError("'parameters' is for built-in shapes only", where=geo_raw.where("parameters"),
-                       fix="remove it, or use 'shape:' instead of 'file:'")
+        raise JobError(
+            "'parameters' is for built-in shapes only",
+            where=geo_raw.where("parameters"),
+            fix="remove it, or use 'shape:' instead of 'file:'",
+        )
     if values["min_size"] and values["max_size"] and values["min_size"] > values["max_size"]:
         raise JobError("'min_size' is larger than 'max_size'", where=data.where("min_size"), fix="swap or fix them")
     output = values["output"] or validate(Located(), job_schema()["output"].fields, JobError, "output")
     base_dir = Path(base_dir)
     return Job(
-        source=source, base_dir=base_dir, shape=geo["shape"], shape_parameters=parameters,
+        source=source,
+        base_dir=base_dir,
+        shape=geo["shape"],
+        shape_parameters=parameters,
         geometry_file=(base_dir / geo["file"]) if geo["file"] else None,
-        allow_multiple_solids=geo["allow_multiple_solids"], feature_angle=float(geo["feature_angle"]),
-        size=values["size"], min_size=values["min_size"], max_size=values["max_size"], recipe=values["recipe"],
+        allow_multiple_solids=geo["allow_multiple_solids"],
+        feature_angle=float(geo["feature_angle"]),
+        size=values["size"],
+        min_size=values["min_size"],
+        max_size=values["max_size"],
+        recipe=values["recipe"],
         placements=load_placements(data["place"], data.where("place"), "job", "job/place") if "place" in data else [],
-        knowledge=[base_dir / k for k in values["knowledge"]], packer=values["packer"], mesher=values["mesher"], seed=values["seed"],
-        output_dir=base_dir / output["directory"], output_name=output["name"],
-        output_formats=list(dict.fromkeys(output["formats"])), raw=data, output_order=output["order"])
+        knowledge=[base_dir / k for k in values["knowledge"]],
+        packer=values["packer"],
+        mesher=values["mesher"],
+        seed=values["seed"],
+        output_dir=base_dir / output["directory"],
+        output_name=output["name"],
+        output_formats=list(dict.fromkeys(output["formats"])),
+        raw=data,
+        output_order=output["order"],
+    )
 
 
 def default_job() -> Job:
     """The built-in example, the paper's Fig. 10 (b): the plate-cylinder junction with the cylinder near the plate
     edge, sized by the recipe junction-edge at H = 12 (about 60,000 tetrahedra in a few seconds)."""
-    return job_from_dict({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge", "size": 12.0},
-                         base_dir=Path.cwd(), source="<default example>")
+    return job_from_dict(
+        {"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge", "size": 12.0},
+        base_dir=Path.cwd(),
+        source="<default example>",
+    )
 
 
 __all__ = ["Job", "load_job", "job_from_dict", "default_job", "OUTPUT_FORMATS"]

@@ -5,6 +5,7 @@ Every file is YAML with a ``kind:`` key (``rules``, ``pattern``, ``recipe``,
 error is one line ``file:line:col: what is wrong; what is allowed`` (a
 :class:`~engine.errors.KnowledgeError`). See ``docs/rules.md`` for the formats.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,29 +17,42 @@ import numpy as np
 
 from .acceptance import Tolerances
 from .errors import FuzzymeshError, KnowledgeError
-from .regions import RegionDistance
 from .expr import Expression, ExpressionError
 from .fcl import load_fcl
 from .fuzzy import Rule, RuleBase, Term, Variable
+from .regions import RegionDistance
 from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, finite, in_range, positive, validate
 from .yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
-KNOWLEDGE_SUFFIXES = (".yaml", ".yml", ".fcl")   # .fcl: rule files in FCL (engine/fcl.py)
+KNOWLEDGE_SUFFIXES = (".yaml", ".yml", ".fcl")  # .fcl: rule files in FCL (engine/fcl.py)
 ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap", "curvature")
 LAWS = ("constant", "linear", "geometric", "power")
-SCALES = ("none", "radius", "thickness", "crack_length", "fillet_radius", "edge_gap", "wall_thickness", "gap_width",
-          "curvature_radius")
+SCALES = (
+    "none",
+    "radius",
+    "thickness",
+    "crack_length",
+    "fillet_radius",
+    "edge_gap",
+    "wall_thickness",
+    "gap_width",
+    "curvature_radius",
+)
 DOMINANCE = ("membership", "tie")
 # anchors on classes of surface pieces of like measure (engine/thickness.py, engine/curvature.py), and their L
 LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width", "curvature": "curvature_radius"}
-FEATURE_TESTS = {"curve": ("closed", "circular", "convex", "sharp", "on_surface", "dihedral_above", "dihedral_below",
-                           "named"),
-                 "patch": ("planar", "cylindrical", "concave", "full_turn", "named")}
-ANGLE_TESTS = ("dihedral_above", "dihedral_below")   # take an angle in degrees; "named" a name; the rest true/false
-COVERAGE_SAMPLES = 401   # per input axis, when checking that every input fires a rule
-OVERRIDES = Field(BOOLEAN, default=False, doc="true: every name this file defines replaces the one of that name "
-                                              "read before it (e.g. a shipped pattern)")
+FEATURE_TESTS = {
+    "curve": ("closed", "circular", "convex", "sharp", "on_surface", "dihedral_above", "dihedral_below", "named"),
+    "patch": ("planar", "cylindrical", "concave", "full_turn", "named"),
+}
+ANGLE_TESTS = ("dihedral_above", "dihedral_below")  # take an angle in degrees; "named" a name; the rest true/false
+COVERAGE_SAMPLES = 401  # per input axis, when checking that every input fires a rule
+OVERRIDES = Field(
+    BOOLEAN,
+    default=False,
+    doc="true: every name this file defines replaces the one of that name read before it (e.g. a shipped pattern)",
+)
 
 
 def _err(what, where, fix=None):
@@ -54,6 +68,7 @@ def _expression(value, names: set[str], where: str) -> Expression:
 
 # ----------------------------------------------------------------------------------- rule bases
 
+
 def _terms_ok(value):
     if not value:
         return "needs at least one term"
@@ -62,8 +77,13 @@ def _terms_ok(value):
 
 VARIABLE = {
     "universe": Field(LIST, required=True, items=Field(NUMBER), doc="[low, high]"),
-    "terms": Field(MAPPING, required=True, open_keys=True, check=_terms_ok,
-                   doc="LABEL: [a, b, c, d] trapezoid or [a, b, c] triangle"),
+    "terms": Field(
+        MAPPING,
+        required=True,
+        open_keys=True,
+        check=_terms_ok,
+        doc="LABEL: [a, b, c, d] trapezoid or [a, b, c] triangle",
+    ),
     "default": Field(NUMBER, doc="output value when no rule fires (outputs only)"),
     "doc": Field(STRING, default=""),
 }
@@ -82,20 +102,38 @@ RULEBASE = {
     "action": Field(MAPPING, open_keys=True, doc="{output: NAME, threshold: NUMBER}: act where output >= threshold"),
 }
 PACKER_SETTINGS = {
-    "diameter": Field(NUMBER, default=0.87, check=in_range(0.5, 1.5),
-                      doc="bubble diameter / h: calibrated so that the median edge of the mesh is h (docs/rules.md "
-                          "section 4, bench/size_calibration.py); the shipped knowledge/population.yaml gives it"),
-    "control_interval": Field(INTEGER, default=10, check=in_range(1, 10_000),
-                              doc="dynamics steps between two population-control rounds"),
-    "control_rounds": Field(INTEGER, default=8, check=in_range(0, 10_000),
-                            doc="population-control rounds per level, after which the bubbles only settle"),
-    "count_radius": Field(NUMBER, default=1.25, check=in_range(1.0, 1.5),
-                          doc="neighbours closer than count_radius x r0 count for the vacancy"),
-    "expected_neighbours": Field(MAPPING, default=None, fields={
-        "curve": Field(INTEGER, default=2, check=in_range(1, 100)),
-        "patch": Field(INTEGER, default=6, check=in_range(1, 100)),
-        "volume": Field(INTEGER, default=12, check=in_range(1, 100))},
-        doc="neighbour count of a well-packed bubble on each level"),
+    "diameter": Field(
+        NUMBER,
+        default=0.87,
+        check=in_range(0.5, 1.5),
+        doc="bubble diameter / h: calibrated so that the median edge of the mesh is h (docs/rules.md "
+        "section 4, bench/size_calibration.py); the shipped knowledge/population.yaml gives it",
+    ),
+    "control_interval": Field(
+        INTEGER, default=10, check=in_range(1, 10_000), doc="dynamics steps between two population-control rounds"
+    ),
+    "control_rounds": Field(
+        INTEGER,
+        default=8,
+        check=in_range(0, 10_000),
+        doc="population-control rounds per level, after which the bubbles only settle",
+    ),
+    "count_radius": Field(
+        NUMBER,
+        default=1.25,
+        check=in_range(1.0, 1.5),
+        doc="neighbours closer than count_radius x r0 count for the vacancy",
+    ),
+    "expected_neighbours": Field(
+        MAPPING,
+        default=None,
+        fields={
+            "curve": Field(INTEGER, default=2, check=in_range(1, 100)),
+            "patch": Field(INTEGER, default=6, check=in_range(1, 100)),
+            "volume": Field(INTEGER, default=12, check=in_range(1, 100)),
+        },
+        doc="neighbour count of a well-packed bubble on each level",
+    ),
 }
 RULES_FILE = {
     "kind": Field(STRING, required=True),
@@ -116,17 +154,26 @@ def _variable(name, raw: Located, is_output: bool, rb_id: str, where: str) -> Va
     terms = {}
     for label, points in raw["terms"].items():
         term_where = raw["terms"].where(label)
-        if not isinstance(points, list) or len(points) not in (3, 4) or \
-                not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in points):
-            raise _err(f"term '{label}' of '{name}' must be 3 or 4 numbers", term_where,
-                       "give [a, b, c, d] (trapezoid) or [a, b, c] (triangle)")
+        if (
+            not isinstance(points, list)
+            or len(points) not in (3, 4)
+            or not all(isinstance(p, (int, float)) and not isinstance(p, bool) for p in points)
+        ):
+            raise _err(
+                f"term '{label}' of '{name}' must be 3 or 4 numbers",
+                term_where,
+                "give [a, b, c, d] (trapezoid) or [a, b, c] (triangle)",
+            )
         if len(points) == 3:
             points = [points[0], points[1], points[1], points[2]]
         if not all(points[i] <= points[i + 1] for i in range(3)):
             raise _err(f"term '{label}' of '{name}' needs a <= b <= c <= d, got {points}", term_where)
         if points[0] < lo or points[3] > hi:
-            raise _err(f"term '{label}' of '{name}' reaches outside the universe [{lo}, {hi}]", term_where,
-                       "keep the term's points inside the universe (inputs are clipped to it)")
+            raise _err(
+                f"term '{label}' of '{name}' reaches outside the universe [{lo}, {hi}]",
+                term_where,
+                "keep the term's points inside the universe (inputs are clipped to it)",
+            )
         terms[str(label)] = Term(str(label), tuple(float(p) for p in points))
     if is_output and spec["default"] is None:
         raise _err(f"output '{name}' has no default", where, "add 'default:' (the value when no rule fires)")
@@ -140,10 +187,16 @@ def _variable(name, raw: Located, is_output: bool, rb_id: str, where: str) -> Va
 def _rulebase(name, raw: Located, file_id: str) -> RuleBase:
     rb_id = f"{file_id}.{name}"
     spec = validate(raw, RULEBASE, KnowledgeError, rb_id)
-    inputs = {str(k): _variable(k, v, False, rb_id, raw["inputs"].where(k))
-              for k, v in raw["inputs"].items() if _is_map(v, raw["inputs"], k)}
-    outputs = {str(k): _variable(k, v, True, rb_id, raw["outputs"].where(k))
-               for k, v in raw["outputs"].items() if _is_map(v, raw["outputs"], k)}
+    inputs = {
+        str(k): _variable(k, v, False, rb_id, raw["inputs"].where(k))
+        for k, v in raw["inputs"].items()
+        if _is_map(v, raw["inputs"], k)
+    }
+    outputs = {
+        str(k): _variable(k, v, True, rb_id, raw["outputs"].where(k))
+        for k, v in raw["outputs"].items()
+        if _is_map(v, raw["outputs"], k)
+    }
     if not inputs or not outputs:
         raise _err(f"rule base '{rb_id}' needs at least one input and one output", raw.where())
     rules, seen = [], {}
@@ -161,13 +214,23 @@ def _rulebase(name, raw: Located, file_id: str) -> RuleBase:
         raise _err(f"rule base '{rb_id}' has no rules", raw.where("rules"))
     extra = {}
     if spec["action"] is not None:
-        action = validate(raw["action"], {"output": Field(STRING, required=True, choices=tuple(outputs)),
-                                          "threshold": Field(NUMBER, required=True),
-                                          "doc": Field(STRING, default="")}, KnowledgeError, f"{rb_id}.action")
+        action = validate(
+            raw["action"],
+            {
+                "output": Field(STRING, required=True, choices=tuple(outputs)),
+                "threshold": Field(NUMBER, required=True),
+                "doc": Field(STRING, default=""),
+            },
+            KnowledgeError,
+            f"{rb_id}.action",
+        )
         lo, hi = outputs[action["output"]].universe
         if not lo <= action["threshold"] <= hi:
-            raise _err(f"action threshold {action['threshold']} lies outside the universe of '{action['output']}'",
-                       raw["action"].where("threshold"), f"give a value in [{lo}, {hi}]")
+            raise _err(
+                f"action threshold {action['threshold']} lies outside the universe of '{action['output']}'",
+                raw["action"].where("threshold"),
+                f"give a value in [{lo}, {hi}]",
+            )
         extra["action"] = action
     base = RuleBase(rb_id, inputs, outputs, rules, spec["resolution"], raw.where(), extra)
     _check_coverage(base, raw.where("rules"))
@@ -186,13 +249,19 @@ def _clauses(raw: Located, variables: dict, role: str, where: str):
     clauses = []
     for var, label in raw.items():
         if not isinstance(label, str):
-            raise _err(f"the label of '{var}' must be a name, got {type(label).__name__}", raw.where(var),
-                       "write e.g. 'overlap: LARGE'")
+            raise _err(
+                f"the label of '{var}' must be a name, got {type(label).__name__}",
+                raw.where(var),
+                "write e.g. 'overlap: LARGE'",
+            )
         if var not in variables:
             raise _err(f"unknown {role} '{var}'", raw.where(var), f"known {role}s: {', '.join(variables)}")
         if label not in variables[var].terms:
-            raise _err(f"label '{label}' is not defined for {role} '{var}'", raw.where(var),
-                       f"defined labels: {', '.join(variables[var].terms)}")
+            raise _err(
+                f"label '{label}' is not defined for {role} '{var}'",
+                raw.where(var),
+                f"defined labels: {', '.join(variables[var].terms)}",
+            )
         clauses.append((str(var), str(label)))
     return tuple(clauses)
 
@@ -212,8 +281,11 @@ def _check_coverage(base: RuleBase, where: str) -> None:
     if not fired.all():
         bad = np.flatnonzero(~fired)[0]
         at = ", ".join(f"{name} = {values[name][bad]:.6g}" for name in base.inputs)
-        raise _err(f"rule base '{base.id}': no rule fires at {at}", where,
-                   "add a term or a rule that covers this input, so no input is silently ignored")
+        raise _err(
+            f"rule base '{base.id}': no rule fires at {at}",
+            where,
+            "add a term or a rule that covers this input, so no input is silently ignored",
+        )
 
 
 def load_rules(raw: Located, source: str) -> tuple[dict[str, RuleBase], dict | None]:
@@ -232,18 +304,19 @@ def load_rules(raw: Located, source: str) -> tuple[dict[str, RuleBase], dict | N
 
 # ------------------------------------------------------------------------------------- patterns
 
+
 @dataclass
 class Zone:
     """One part of a pattern: a distance, a spacing law h(d) and a membership mu(d)."""
 
     id: str
-    distance: str                 # "anchor" or "ligament:<role>"
+    distance: str  # "anchor" or "ligament:<role>"
     law: str
     near: Expression
     far: Expression | None
     over: Expression | None
     exponent: Expression | None
-    trapezoid: tuple[Expression, Expression, Expression, Expression] | None   # None: constant membership
+    trapezoid: tuple[Expression, Expression, Expression, Expression] | None  # None: constant membership
     height: Expression
     active_if: Expression | None
     source: str
@@ -267,7 +340,7 @@ class Pattern:
     roles: dict[str, tuple[str | None, str]]
     zones: list[Zone]
     source: str
-    dominance: str = "membership"   # or "tie": its mu is the other patterns' highest, the smaller h wins
+    dominance: str = "membership"  # or "tie": its mu is the other patterns' highest, the smaller h wins
 
     def expression_names(self) -> set[str]:
         names = set(self.parameters) | {"H"}
@@ -284,32 +357,48 @@ PATTERN_FILE = {
     "anchor": Field(STRING, required=True, choices=ANCHORS, doc="what the pattern is placed on"),
     "accepts": Field(LIST, default=[], items=Field(STRING), doc="feature kinds 'every:' may place it on"),
     "scale": Field(STRING, default="none", choices=SCALES, doc="what the length L in expressions is"),
-    "dominance": Field(STRING, default="membership", choices=DOMINANCE,
-                       doc="'membership': its own mu competes; 'tie': where it reaches, it ties with the "
-                           "strongest other pattern, so it wins only where it asks for smaller elements"),
+    "dominance": Field(
+        STRING,
+        default="membership",
+        choices=DOMINANCE,
+        doc="'membership': its own mu competes; 'tie': where it reaches, it ties with the "
+        "strongest other pattern, so it wins only where it asks for smaller elements",
+    ),
     "parameters": Field(MAPPING, default={}, open_keys=True, doc="NAME: {default: NUMBER, doc: TEXT}"),
     "roles": Field(MAPPING, default={}, open_keys=True, doc="other features the pattern uses: ROLE: {default, doc}"),
     "zones": Field(LIST, required=True, doc="one or more zones"),
 }
-PARAMETER = {"default": Field(NUMBER, check=finite, doc="the value when the placement gives none"),
-             "doc": Field(STRING, required=True, doc="what the parameter means")}
-ROLE = {"default": Field(STRING, doc="feature name used when the placement gives none"),
-        "doc": Field(STRING, required=True)}
+PARAMETER = {
+    "default": Field(NUMBER, check=finite, doc="the value when the placement gives none"),
+    "doc": Field(STRING, required=True, doc="what the parameter means"),
+}
+ROLE = {
+    "default": Field(STRING, doc="feature name used when the placement gives none"),
+    "doc": Field(STRING, required=True),
+}
 ZONE = {
     "id": Field(STRING, required=True, doc="the zone's id, cited by the audit"),
     "distance": Field(STRING, default="anchor", doc="'anchor' or 'ligament: ROLE'"),
-    "size": Field(MAPPING, required=True, fields={
-        "law": Field(STRING, required=True, choices=LAWS),
-        "near": Field((NUMBER, STRING), required=True, doc="h at distance 0"),
-        "far": Field((NUMBER, STRING), doc="h at distance 'over' and beyond"),
-        "over": Field((NUMBER, STRING), doc="distance over which h goes from near to far"),
-        "exponent": Field((NUMBER, STRING), doc="power law exponent"),
-    }),
-    "membership": Field(MAPPING, required=True, fields={
-        "trapezoid": Field(LIST, doc="[a, b, c, d] over the distance"),
-        "constant": Field((NUMBER, STRING), doc="the same membership everywhere"),
-        "height": Field((NUMBER, STRING), default=1.0, doc="membership at the top of the trapezoid"),
-    }),
+    "size": Field(
+        MAPPING,
+        required=True,
+        fields={
+            "law": Field(STRING, required=True, choices=LAWS),
+            "near": Field((NUMBER, STRING), required=True, doc="h at distance 0"),
+            "far": Field((NUMBER, STRING), doc="h at distance 'over' and beyond"),
+            "over": Field((NUMBER, STRING), doc="distance over which h goes from near to far"),
+            "exponent": Field((NUMBER, STRING), doc="power law exponent"),
+        },
+    ),
+    "membership": Field(
+        MAPPING,
+        required=True,
+        fields={
+            "trapezoid": Field(LIST, doc="[a, b, c, d] over the distance"),
+            "constant": Field((NUMBER, STRING), doc="the same membership everywhere"),
+            "height": Field((NUMBER, STRING), default=1.0, doc="membership at the top of the trapezoid"),
+        },
+    ),
     "active_if": Field(STRING, doc="an expression; the zone applies only where it is > 0"),
     "doc": Field(STRING, default=""),
 }
@@ -320,8 +409,11 @@ def load_pattern(raw: Located, source: str) -> Pattern:
     params = {}
     for name, body in raw["parameters"].items() if "parameters" in raw else []:
         if not str(name).isidentifier() or name in ("H", "L"):
-            raise _err(f"parameter name '{name}' is not allowed", raw["parameters"].where(name),
-                       "use a letter-and-underscore name other than H and L")
+            raise _err(
+                f"parameter name '{name}' is not allowed",
+                raw["parameters"].where(name),
+                "use a letter-and-underscore name other than H and L",
+            )
         p = validate(body, PARAMETER, KnowledgeError, f"parameters.{name}", raw["parameters"].where(name))
         params[str(name)] = Parameter(p["default"], p["doc"], raw["parameters"].where(name))
     roles = {}
@@ -332,12 +424,24 @@ def load_pattern(raw: Located, source: str) -> Pattern:
         roles[str(name)] = (r["default"], r["doc"])
     local_scale = LOCAL_SCALES.get(spec["anchor"])
     if (local_scale or spec["scale"] in LOCAL_SCALES.values()) and spec["scale"] != local_scale:
-        raise _err(f"anchor '{spec['anchor']}' and scale '{spec['scale']}' do not go together",
-                   raw.where("scale") if "scale" in raw else raw.where("anchor"),
-                   ", ".join(f"anchor {a} takes scale {s}" for a, s in LOCAL_SCALES.items())
-                   + ", and those scales no other anchor")
-    pattern = Pattern(spec["name"], spec["doc"], spec["anchor"], spec["accepts"], spec["scale"], params, roles,
-                      [], source, spec["dominance"])
+        raise _err(
+            f"anchor '{spec['anchor']}' and scale '{spec['scale']}' do not go together",
+            raw.where("scale") if "scale" in raw else raw.where("anchor"),
+            ", ".join(f"anchor {a} takes scale {s}" for a, s in LOCAL_SCALES.items())
+            + ", and those scales no other anchor",
+        )
+    pattern = Pattern(
+        spec["name"],
+        spec["doc"],
+        spec["anchor"],
+        spec["accepts"],
+        spec["scale"],
+        params,
+        roles,
+        [],
+        source,
+        spec["dominance"],
+    )
     names = pattern.expression_names()
     gap_names = names | {f"gap_{role}" for role in roles}
     if not spec["zones"]:
@@ -361,16 +465,25 @@ def _zone(body: Located, names, gap_names, roles, seen) -> Zone:
     if distance != "anchor":
         role = distance.split(":", 1)[1] if distance.startswith("ligament:") else None
         if role not in roles:
-            raise _err(f"distance '{z['distance']}' is not known", body.where("distance"),
-                       f"use 'anchor' or 'ligament: ROLE' with a declared role ({', '.join(roles) or 'none declared'})")
+            raise _err(
+                f"distance '{z['distance']}' is not known",
+                body.where("distance"),
+                f"use 'anchor' or 'ligament: ROLE' with a declared role ({', '.join(roles) or 'none declared'})",
+            )
     size, raw_size = z["size"], body["size"]
-    needs = {"constant": (), "linear": ("far", "over"), "geometric": ("far", "over"),
-             "power": ("far", "over", "exponent")}[size["law"]]
+    needs = {
+        "constant": (),
+        "linear": ("far", "over"),
+        "geometric": ("far", "over"),
+        "power": ("far", "over", "exponent"),
+    }[size["law"]]
     for key in needs:
         if size[key] is None:
             raise _err(f"law '{size['law']}' needs '{key}'", raw_size.where(), f"add '{key}:'")
-    expr = {k: _expression(size[k], names, raw_size.where(k)) if size[k] is not None else None
-            for k in ("near", "far", "over", "exponent")}
+    expr = {
+        k: _expression(size[k], names, raw_size.where(k)) if size[k] is not None else None
+        for k in ("near", "far", "over", "exponent")
+    }
     member, raw_member = z["membership"], body["membership"]
     if (member["trapezoid"] is None) == (member["constant"] is None):
         raise _err("membership needs exactly one of 'trapezoid' or 'constant'", raw_member.where())
@@ -383,8 +496,19 @@ def _zone(body: Located, names, gap_names, roles, seen) -> Zone:
         trapezoid = None
         height = _expression(member["constant"], names, raw_member.where("constant"))
     active = _expression(z["active_if"], gap_names, body.where("active_if")) if z["active_if"] else None
-    return Zone(z["id"], distance, size["law"], expr["near"], expr["far"], expr["over"], expr["exponent"],
-                trapezoid, height, active, body.where())
+    return Zone(
+        z["id"],
+        distance,
+        size["law"],
+        expr["near"],
+        expr["far"],
+        expr["over"],
+        expr["exponent"],
+        trapezoid,
+        height,
+        active,
+        body.where(),
+    )
 
 
 # ------------------------------------------------------------------------------- pattern values
@@ -398,12 +522,21 @@ SAMPLE_L = (0.1, 1.0, 10.0)
 def check_values(pattern: Pattern, parameters: dict, placement: "Placement | None" = None) -> None:
     """Evaluate every zone of ``pattern`` with ``parameters`` at the sample L and H (L the placement's
     ``scale`` if it gives one), so a broken size law is found before any geometry is read."""
-    lengths = [None] if pattern.scale == "none" else \
-        [placement.scale] if placement is not None and placement.scale is not None else None
+    lengths = (
+        [None]
+        if pattern.scale == "none"
+        else [placement.scale]
+        if placement is not None and placement.scale is not None
+        else None
+    )
     for H in SAMPLE_H:
         for L in lengths or [q * H for q in SAMPLE_L]:
-            env = {**parameters, "H": H, **({"L": L} if L is not None else {}),
-                   **{f"gap_{role}": 0.0 for role in pattern.roles}}
+            env = {
+                **parameters,
+                "H": H,
+                **({"L": L} if L is not None else {}),
+                **{f"gap_{role}": 0.0 for role in pattern.roles},
+            }
             for zone in pattern.zones:
                 zone_values(pattern, zone, env, placement, " at a sample L and H")
 
@@ -417,12 +550,23 @@ def _value_error(pattern, zone, what, exprs, problem, fix, env, placement, on) -
     if placement is None:
         return _err(f"{text}, with the default parameters{on}", exprs[0].where, fix)
     given = [n for n in names if n in placement.parameters]
-    return _err(f"{text}, as placed here{on} (the {what} is at {exprs[0].where})",
-                placement.where(f"parameters.{given[0]}") if given else placement.source, fix)
+    return _err(
+        f"{text}, as placed here{on} (the {what} is at {exprs[0].where})",
+        placement.where(f"parameters.{given[0]}") if given else placement.source,
+        fix,
+    )
 
 
-def expression_value(pattern: Pattern, zone: Zone, expr: Expression, what: str, env: dict,
-                     placement: "Placement | None" = None, on: str = "", finite: bool = True) -> float:
+def expression_value(
+    pattern: Pattern,
+    zone: Zone,
+    expr: Expression,
+    what: str,
+    env: dict,
+    placement: "Placement | None" = None,
+    on: str = "",
+    finite: bool = True,
+) -> float:
     """``expr`` at ``env``: a finite number (``finite=False``: not NaN), else a located error."""
     try:
         number = expr(env)
@@ -432,18 +576,28 @@ def expression_value(pattern: Pattern, zone: Zone, expr: Expression, what: str, 
         if math.isfinite(number) or not finite and not math.isnan(number):
             return number
         problem = "is not a number" if math.isnan(number) else "overflows (beyond 1.8e308)"
-    raise _value_error(pattern, zone, what, [expr], problem,
-                       "change the expression or the parameters so it is a finite number for every L and H",
-                       env, placement, on)
+    raise _value_error(
+        pattern,
+        zone,
+        what,
+        [expr],
+        problem,
+        "change the expression or the parameters so it is a finite number for every L and H",
+        env,
+        placement,
+        on,
+    )
 
 
-def zone_values(pattern: Pattern, zone: Zone, env: dict, placement: "Placement | None" = None,
-                on: str = "") -> dict | None:
+def zone_values(
+    pattern: Pattern, zone: Zone, env: dict, placement: "Placement | None" = None, on: str = ""
+) -> dict | None:
     """The zone's numbers at ``env`` (``near``, ``far``, ``over``, ``exponent``, ``height``, ``trapezoid``),
     None where its ``active_if`` is off. Each must be finite, the sizes, ``over`` and ``exponent`` > 0, the
     height in [0, 1] and the trapezoid ordered; else an error naming the expression's file:line, the values
     used and, when given, the placement (``on`` says more: the feature it is bound to, or that L and H are
     samples)."""
+
     def value(expr, what, finite=True):
         return expression_value(pattern, zone, expr, what, env, placement, on, finite)
 
@@ -454,24 +608,31 @@ def zone_values(pattern: Pattern, zone: Zone, env: dict, placement: "Placement |
     near = value(zone.near, "'near'")
     if zone.active_if is not None and not value(zone.active_if, "'active_if'", finite=False) > 0:
         return None
-    numbers = {"near": near, "far": value(zone.far, "'far'") if zone.far else near,
-               "over": value(zone.over, "'over'") if zone.over else 1.0,
-               "exponent": value(zone.exponent, "'exponent'") if zone.exponent else 1.0,
-               "height": value(zone.height, height), "trapezoid": None}
+    numbers = {
+        "near": near,
+        "far": value(zone.far, "'far'") if zone.far else near,
+        "over": value(zone.over, "'over'") if zone.over else 1.0,
+        "exponent": value(zone.exponent, "'exponent'") if zone.exponent else 1.0,
+        "height": value(zone.height, height),
+        "trapezoid": None,
+    }
     for key in ("near", "far", "over", "exponent"):
         expr = getattr(zone, key)
         if expr is not None and numbers[key] <= 0:
-            raise fail(f"'{key}'", [expr], f"is {numbers[key]:g}, not > 0",
-                       "make it positive for every L and H")
+            raise fail(f"'{key}'", [expr], f"is {numbers[key]:g}, not > 0", "make it positive for every L and H")
     if not 0 <= numbers["height"] <= 1:
-        raise fail(height, [zone.height], f"is {numbers['height']:g}, not in [0, 1]",
-                   "give a membership between 0 and 1")
+        raise fail(
+            height, [zone.height], f"is {numbers['height']:g}, not in [0, 1]", "give a membership between 0 and 1"
+        )
     if zone.trapezoid is not None:
         points = tuple(value(e, f"trapezoid point {i + 1}") for i, e in enumerate(zone.trapezoid))
         if not all(points[i] <= points[i + 1] for i in range(3)):
-            raise fail("the trapezoid", list(zone.trapezoid),
-                       f"is [{', '.join(f'{x:g}' for x in points)}], not ordered a <= b <= c <= d",
-                       "order its points for every L and H")
+            raise fail(
+                "the trapezoid",
+                list(zone.trapezoid),
+                f"is [{', '.join(f'{x:g}' for x in points)}], not ordered a <= b <= c <= d",
+                "order its points for every L and H",
+            )
         numbers["trapezoid"] = points
     return numbers
 
@@ -484,8 +645,9 @@ PLACEMENT = {
     "at": Field(STRING, doc="a feature name, e.g. junction"),
     "every": Field(STRING, doc="a feature kind, e.g. hole"),
     "point": Field(LIST, items=Field(NUMBER), doc="[x, y, z] for point patterns"),
-    "region": Field(MAPPING, open_keys=True, doc="{box: {min, max}} | {sphere: {centre, radius}} | "
-                                                 "{cylinder: {start, end, radius}}"),
+    "region": Field(
+        MAPPING, open_keys=True, doc="{box: {min, max}} | {sphere: {centre, radius}} | {cylinder: {start, end, radius}}"
+    ),
     "roles": Field(MAPPING, default={}, open_keys=True, doc="ROLE: feature name"),
     "parameters": Field(MAPPING, default={}, open_keys=True, doc="PARAMETER: number"),
     "scale": Field(NUMBER, check=positive, doc="the length L, overriding the one taken from the feature"),
@@ -506,8 +668,8 @@ class Placement:
     parameters: dict
     scale: float | None
     source: str
-    origin: str              # "recipe NAME" or "job"
-    key_where: dict = field(default_factory=dict)   # key -> file:line:col
+    origin: str  # "recipe NAME" or "job"
+    key_where: dict = field(default_factory=dict)  # key -> file:line:col
 
     def where(self, key: str | None = None) -> str:
         return self.key_where.get(key, self.source)
@@ -523,8 +685,9 @@ def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Plac
         p = validate(body, PLACEMENT, KnowledgeError, "placement")
         given = [k for k in ("at", "every", "point", "region") if p[k] is not None]
         if len(given) > 1:
-            raise _err(f"a placement takes one of at / every / point / region, got {', '.join(given)}",
-                       body.where(given[1]))
+            raise _err(
+                f"a placement takes one of at / every / point / region, got {', '.join(given)}", body.where(given[1])
+            )
         if p["point"] is not None and len(p["point"]) != 3:
             raise _err("'point' needs three coordinates [x, y, z]", body.where("point"))
         for name, value in p["parameters"].items():
@@ -536,9 +699,22 @@ def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Plac
         for section in ("parameters", "roles"):
             if section in body:
                 key_where.update({f"{section}.{k}": body[section].where(k) for k in body[section]})
-        placements.append(Placement(p["pattern"], p["id"] or f"{prefix}[{index}]", p["at"], p["every"], p["point"],
-                                    p["region"], dict(p["roles"]), dict(p["parameters"]), p["scale"],
-                                    body.where(), origin, key_where))
+        placements.append(
+            Placement(
+                p["pattern"],
+                p["id"] or f"{prefix}[{index}]",
+                p["at"],
+                p["every"],
+                p["point"],
+                p["region"],
+                dict(p["roles"]),
+                dict(p["parameters"]),
+                p["scale"],
+                body.where(),
+                origin,
+                key_where,
+            )
+        )
     return placements
 
 
@@ -561,14 +737,14 @@ RECIPE_FILE = {
 
 def load_recipe(raw: Located, source: str) -> Recipe:
     spec = validate(raw, RECIPE_FILE, KnowledgeError)
-    placements = load_placements(raw["place"], raw.where("place"), f"recipe {spec['name']}",
-                                 f"{spec['name']}/place")
+    placements = load_placements(raw["place"], raw.where("place"), f"recipe {spec['name']}", f"{spec['name']}/place")
     if not placements:
         raise _err("a recipe needs at least one placement", raw.where("place"))
     return Recipe(spec["name"], spec["doc"], placements, source)
 
 
 # ---------------------------------------------------------------------------- feature kinds etc.
+
 
 @dataclass
 class FeatureKind:
@@ -579,15 +755,24 @@ class FeatureKind:
     source: str
 
 
-FEATURE_KIND = {"of": Field(STRING, required=True, choices=("curve", "patch")),
-                "when": Field(MAPPING, required=True, open_keys=True, doc="TEST: value"),
-                "doc": Field(STRING, required=True)}
+FEATURE_KIND = {
+    "of": Field(STRING, required=True, choices=("curve", "patch")),
+    "when": Field(MAPPING, required=True, open_keys=True, doc="TEST: value"),
+    "doc": Field(STRING, required=True),
+}
 
 
 def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
-    spec = validate(raw, {"kind": Field(STRING, required=True), "doc": Field(STRING, default=""),
-                          "overrides": OVERRIDES, "kinds": Field(MAPPING, required=True, open_keys=True)},
-                    KnowledgeError)
+    spec = validate(
+        raw,
+        {
+            "kind": Field(STRING, required=True),
+            "doc": Field(STRING, default=""),
+            "overrides": OVERRIDES,
+            "kinds": Field(MAPPING, required=True, open_keys=True),
+        },
+        KnowledgeError,
+    )
     kinds = {}
     for name, body in raw["kinds"].items():
         k = validate(body, FEATURE_KIND, KnowledgeError, f"kinds.{name}", raw["kinds"].where(name))
@@ -595,18 +780,31 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
         when = body["when"]
         for test, value in when.items():
             if test not in allowed:
-                raise _err(f"unknown test '{test}' for a {k['of']}", when.where(test),
-                           f"tests for a {k['of']}: {', '.join(allowed)}")
+                raise _err(
+                    f"unknown test '{test}' for a {k['of']}",
+                    when.where(test),
+                    f"tests for a {k['of']}: {', '.join(allowed)}",
+                )
             if test in ANGLE_TESTS:
                 if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 180:
-                    raise _err(f"test '{test}' takes an angle in degrees from 0 to 180, got {value!r}",
-                               when.where(test), f"e.g. '{test}: 60' (the angle between the faces' normals)")
+                    raise _err(
+                        f"test '{test}' takes an angle in degrees from 0 to 180, got {value!r}",
+                        when.where(test),
+                        f"e.g. '{test}: 60' (the angle between the faces' normals)",
+                    )
             elif not isinstance(value, str if test == "named" else bool):
-                raise _err(f"test '{test}' takes {'a feature name' if test == 'named' else 'true or false'}",
-                           when.where(test), f"e.g. '{test}: {'crack-front' if test == 'named' else 'true'}'")
+                raise _err(
+                    f"test '{test}' takes {'a feature name' if test == 'named' else 'true or false'}",
+                    when.where(test),
+                    f"e.g. '{test}: {'crack-front' if test == 'named' else 'true'}'",
+                )
         if set(ANGLE_TESTS) <= set(when) and when["dihedral_above"] >= when["dihedral_below"]:
-            raise _err(f"no curve passes dihedral_above: {when['dihedral_above']} and dihedral_below: "
-                       f"{when['dihedral_below']}", when.where("dihedral_below"), "make dihedral_above the smaller")
+            raise _err(
+                f"no curve passes dihedral_above: {when['dihedral_above']} and dihedral_below: "
+                f"{when['dihedral_below']}",
+                when.where("dihedral_below"),
+                "make dihedral_above the smaller",
+            )
         kinds[str(name)] = FeatureKind(str(name), k["of"], dict(body["when"]), k["doc"], raw["kinds"].where(name))
     del spec
     return kinds
@@ -615,26 +813,53 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
 SIZING_FILE = {
     "kind": Field(STRING, required=True),
     "doc": Field(STRING, default=""),
-    "gradation": Field(NUMBER, default=1.3, check=in_range(1.01, 3.0),
-                       doc="the largest ratio of sizes one element apart: h(y) <= h(x) + (g - 1)|x - y|"),
+    "gradation": Field(
+        NUMBER,
+        default=1.3,
+        check=in_range(1.01, 3.0),
+        doc="the largest ratio of sizes one element apart: h(y) <= h(x) + (g - 1)|x - y|",
+    ),
     "base_pattern": Field(STRING, default="uniform-domain", doc="the pattern placed when a job places none"),
-    "always_place": Field(LIST, default=[], doc="placements added to every job, unless it places the same "
-                                                "pattern itself"),
-    "acceptance": Field(MAPPING, default=None, doc="the acceptance gate's tolerances (engine/acceptance.py)", fields={
-        "min_dihedral": Field(NUMBER, default=Tolerances.min_dihedral, check=in_range(0.0, 60.0),
-                              doc="smallest dihedral angle of any tetrahedron, degrees"),
-        "volume": Field(NUMBER, default=Tolerances.volume, check=in_range(0.0, 1.0),
-                        doc="largest |mesh volume / input volume - 1|"),
-        "hausdorff": Field(NUMBER, default=Tolerances.hausdorff, check=in_range(0.0, 100.0),
-                           doc="largest distance between the mesh boundary and the input surface, each way, "
-                               "over the target size h there"),
-        "quadratic_jacobian": Field(NUMBER, default=Tolerances.quadratic_jacobian, check=in_range(0.0, 1.0),
-                                    doc="smallest scaled Jacobian of a 10-node tetrahedron"),
-    }),
+    "always_place": Field(
+        LIST, default=[], doc="placements added to every job, unless it places the same pattern itself"
+    ),
+    "acceptance": Field(
+        MAPPING,
+        default=None,
+        doc="the acceptance gate's tolerances (engine/acceptance.py)",
+        fields={
+            "min_dihedral": Field(
+                NUMBER,
+                default=Tolerances.min_dihedral,
+                check=in_range(0.0, 60.0),
+                doc="smallest dihedral angle of any tetrahedron, degrees",
+            ),
+            "volume": Field(
+                NUMBER,
+                default=Tolerances.volume,
+                check=in_range(0.0, 1.0),
+                doc="largest |mesh volume / input volume - 1|",
+            ),
+            "hausdorff": Field(
+                NUMBER,
+                default=Tolerances.hausdorff,
+                check=in_range(0.0, 100.0),
+                doc="largest distance between the mesh boundary and the input surface, each way, "
+                "over the target size h there",
+            ),
+            "quadratic_jacobian": Field(
+                NUMBER,
+                default=Tolerances.quadratic_jacobian,
+                check=in_range(0.0, 1.0),
+                doc="smallest scaled Jacobian of a 10-node tetrahedron",
+            ),
+        },
+    ),
 }
 
 
 # ------------------------------------------------------------------------------ knowledge base
+
 
 @dataclass
 class KnowledgeBase:
@@ -642,10 +867,16 @@ class KnowledgeBase:
     patterns: dict[str, Pattern] = field(default_factory=dict)
     recipes: dict[str, Recipe] = field(default_factory=dict)
     feature_kinds: dict[str, FeatureKind] = field(default_factory=dict)
-    sizing: dict = field(default_factory=lambda: {"gradation": 1.3, "base_pattern": "uniform-domain",
-                                                  "always_place": [], "acceptance": Tolerances(),
-                                                  "where": "built-in defaults"})
-    packer_settings: dict[str, dict] = field(default_factory=dict)   # rule file id -> its packer settings
+    sizing: dict = field(
+        default_factory=lambda: {
+            "gradation": 1.3,
+            "base_pattern": "uniform-domain",
+            "always_place": [],
+            "acceptance": Tolerances(),
+            "where": "built-in defaults",
+        }
+    )
+    packer_settings: dict[str, dict] = field(default_factory=dict)  # rule file id -> its packer settings
 
     def add_file(self, path: Path) -> None:
         raw = load_fcl(path) if Path(path).suffix == ".fcl" else load_yaml(path, KnowledgeError)
@@ -654,13 +885,20 @@ class KnowledgeBase:
             raise _err("a knowledge file must be a YAML mapping with 'kind:'", f"{source}:1:1")
         kind = raw.get("kind")
         if kind not in FILE_KINDS:
-            raise _err(f"unknown or missing kind '{kind}'" if kind else "missing 'kind:'",
-                       raw.where("kind") if "kind" in raw else raw.where(), f"kind is one of: {', '.join(FILE_KINDS)}")
+            raise _err(
+                f"unknown or missing kind '{kind}'" if kind else "missing 'kind:'",
+                raw.where("kind") if "kind" in raw else raw.where(),
+                f"kind is one of: {', '.join(FILE_KINDS)}",
+            )
         if kind == "rules":
             bases, settings = load_rules(raw, source)
             names = raw["rulebases"]
-            self._add(self.rulebases, "rule base", {f"{raw['id']}.{n}": (bases[f"{raw['id']}.{n}"], names.where(n))
-                                                    for n in names}, raw)
+            self._add(
+                self.rulebases,
+                "rule base",
+                {f"{raw['id']}.{n}": (bases[f"{raw['id']}.{n}"], names.where(n)) for n in names},
+                raw,
+            )
             if settings is not None:
                 self.packer_settings[str(raw["id"])] = settings
         elif kind == "pattern":
@@ -677,8 +915,9 @@ class KnowledgeBase:
             self.sizing["acceptance"] = Tolerances(**(self.sizing["acceptance"] or {}))
             self.sizing["where"] = raw.where("base_pattern")
             if "always_place" in raw:
-                self.sizing["always_place"] = load_placements(raw["always_place"], raw.where("always_place"),
-                                                              "sizing defaults", "always")
+                self.sizing["always_place"] = load_placements(
+                    raw["always_place"], raw.where("always_place"), "sizing defaults", "always"
+                )
 
     @staticmethod
     def _add(table: dict, noun: str, items: dict, raw: Located) -> None:
@@ -688,17 +927,24 @@ class KnowledgeBase:
         for key, (value, where) in items.items():
             if key in table and not overrides:
                 first = getattr(table[key], "source", "")
-                raise _err(f"{noun} '{key}' is defined twice (also in {first})", where,
-                           "rename it, or add 'overrides: true' to this file to replace the other")
+                raise _err(
+                    f"{noun} '{key}' is defined twice (also in {first})",
+                    where,
+                    "rename it, or add 'overrides: true' to this file to replace the other",
+                )
             if key not in table and overrides:
-                raise _err(f"'overrides: true', but no {noun} '{key}' is defined before this file", where,
-                           f"remove 'overrides: true', or name the {noun} it replaces")
+                raise _err(
+                    f"'overrides: true', but no {noun} '{key}' is defined before this file",
+                    where,
+                    f"remove 'overrides: true', or name the {noun} it replaces",
+                )
         table.update({key: value for key, (value, _) in items.items()})
 
     def problems(self, sizings: list[dict] | None = None) -> list[FuzzymeshError]:
         """The cross-file checks, the first problem of each recipe and of the sizing defaults (``sizings``: of
         each sizing file read, not only the one in force): their placements name existing patterns,
         parameters, roles and feature kinds and evaluate (:func:`check_values`), the base pattern exists."""
+
         def placements(items):
             for placement in items:
                 check_placement(self, placement)
@@ -706,12 +952,17 @@ class KnowledgeBase:
         def defaults(sizing):
             placements(sizing["always_place"])
             if sizing["base_pattern"] not in self.patterns and self.patterns:
-                raise _err(f"base pattern '{sizing['base_pattern']}' is not in the pattern library",
-                           sizing["where"], f"name one of: {', '.join(sorted(self.patterns))}")
+                raise _err(
+                    f"base pattern '{sizing['base_pattern']}' is not in the pattern library",
+                    sizing["where"],
+                    f"name one of: {', '.join(sorted(self.patterns))}",
+                )
 
         found = []
-        for check in [*(partial(placements, r.placements) for r in self.recipes.values()),
-                      *(partial(defaults, sizing) for sizing in sizings or [self.sizing])]:
+        for check in [
+            *(partial(placements, r.placements) for r in self.recipes.values()),
+            *(partial(defaults, sizing) for sizing in sizings or [self.sizing]),
+        ]:
             try:
                 check()
             except FuzzymeshError as exc:
@@ -729,40 +980,73 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
     """The placement's pattern, after checking its parameters, roles and anchor keys."""
     pattern = kb.patterns.get(placement.pattern)
     if pattern is None:
-        raise _err(f"unknown pattern '{placement.pattern}'", placement.where("pattern"),
-                   f"known patterns: {', '.join(sorted(kb.patterns))}")
+        raise _err(
+            f"unknown pattern '{placement.pattern}'",
+            placement.where("pattern"),
+            f"known patterns: {', '.join(sorted(kb.patterns))}",
+        )
     for name in placement.parameters:
         if name not in pattern.parameters:
-            raise _err(f"pattern '{pattern.name}' has no parameter '{name}'", placement.where(f"parameters.{name}"),
-                       f"its parameters: {', '.join(pattern.parameters) or 'none'}")
+            raise _err(
+                f"pattern '{pattern.name}' has no parameter '{name}'",
+                placement.where(f"parameters.{name}"),
+                f"its parameters: {', '.join(pattern.parameters) or 'none'}",
+            )
     for name in placement.roles:
         if name not in pattern.roles:
-            raise _err(f"pattern '{pattern.name}' has no role '{name}'", placement.where(f"roles.{name}"),
-                       f"its roles: {', '.join(pattern.roles) or 'none'}")
+            raise _err(
+                f"pattern '{pattern.name}' has no role '{name}'",
+                placement.where(f"roles.{name}"),
+                f"its roles: {', '.join(pattern.roles) or 'none'}",
+            )
     missing = [n for n, p in pattern.parameters.items() if p.default is None and n not in placement.parameters]
     if missing:
-        raise _err(f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}", placement.source,
-                   "give them under 'parameters:'")
+        raise _err(
+            f"pattern '{pattern.name}' needs parameter(s) {', '.join(missing)}",
+            placement.source,
+            "give them under 'parameters:'",
+        )
     check_values(pattern, {**{n: p.default for n, p in pattern.parameters.items()}, **placement.parameters}, placement)
-    anchor_key = {"point": ("point", "at"), "curve": ("at", "every"), "surface": ("at", "every"),
-                  "region": ("region",), "domain": (), **{local: () for local in LOCAL_SCALES}}[pattern.anchor]
+    anchor_key = {
+        "point": ("point", "at"),
+        "curve": ("at", "every"),
+        "surface": ("at", "every"),
+        "region": ("region",),
+        "domain": (),
+        **{local: () for local in LOCAL_SCALES},
+    }[pattern.anchor]
     given = [k for k in ("at", "every", "point", "region") if getattr(placement, k) is not None]
     if pattern.anchor == "domain" and given:
-        raise _err(f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'",
-                   placement.where(given[0]), f"remove '{given[0]}:'")
+        raise _err(
+            f"pattern '{pattern.name}' covers the whole domain and takes no '{given[0]}'",
+            placement.where(given[0]),
+            f"remove '{given[0]}:'",
+        )
     if not anchor_key and given:
-        raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) finds its place on the solid by itself "
-                   f"and takes no '{given[0]}'", placement.where(given[0]), f"remove '{given[0]}:'")
+        raise _err(
+            f"pattern '{pattern.name}' (anchor: {pattern.anchor}) finds its place on the solid by itself "
+            f"and takes no '{given[0]}'",
+            placement.where(given[0]),
+            f"remove '{given[0]}:'",
+        )
     if anchor_key and (not given or given[0] not in anchor_key):
-        raise _err(f"pattern '{pattern.name}' (anchor: {pattern.anchor}) needs one of: {', '.join(anchor_key)}",
-                   placement.where(given[0]) if given else placement.source)
+        raise _err(
+            f"pattern '{pattern.name}' (anchor: {pattern.anchor}) needs one of: {', '.join(anchor_key)}",
+            placement.where(given[0]) if given else placement.source,
+        )
     if placement.every is not None:
         if kb.feature_kinds and placement.every not in kb.feature_kinds:
-            raise _err(f"unknown feature kind '{placement.every}'", placement.where("every"),
-                       f"known kinds: {', '.join(sorted(kb.feature_kinds))}")
+            raise _err(
+                f"unknown feature kind '{placement.every}'",
+                placement.where("every"),
+                f"known kinds: {', '.join(sorted(kb.feature_kinds))}",
+            )
         if placement.every not in pattern.accepts:
-            raise _err(f"pattern '{pattern.name}' is not placed on '{placement.every}' features",
-                       placement.where("every"), f"it accepts: {', '.join(pattern.accepts) or 'none (use at:)'}")
+            raise _err(
+                f"pattern '{pattern.name}' is not placed on '{placement.every}' features",
+                placement.where("every"),
+                f"it accepts: {', '.join(pattern.accepts) or 'none (use at:)'}",
+            )
     return pattern
 
 
@@ -799,7 +1083,7 @@ def lint(paths) -> list[str]:
     files = yaml_files(paths)
     linted = {f.resolve() for f in files if f.exists()}
     kb = KnowledgeBase()
-    for path in yaml_files(default_paths()):   # what the linted files add to, or must say they override
+    for path in yaml_files(default_paths()):  # what the linted files add to, or must say they override
         if path.resolve() not in linted:
             try:
                 kb.add_file(path)
@@ -819,5 +1103,16 @@ def lint(paths) -> list[str]:
     return errors + [exc.one_line() for exc in kb.problems(sizings)]
 
 
-__all__ = ["KnowledgeBase", "Pattern", "Zone", "Recipe", "Placement", "FeatureKind", "load_knowledge", "lint",
-           "load_placements", "check_placement", "default_paths"]
+__all__ = [
+    "KnowledgeBase",
+    "Pattern",
+    "Zone",
+    "Recipe",
+    "Placement",
+    "FeatureKind",
+    "load_knowledge",
+    "lint",
+    "load_placements",
+    "check_placement",
+    "default_paths",
+]

@@ -1,19 +1,18 @@
 """The tetrahedral mesh value object."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])   # face k is opposite vertex k, outward
+FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k is opposite vertex k, outward
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """Volume of each tet, positive for positively oriented ones."""
     p = points[tets]
     return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
-
-
 
 
 @dataclass
@@ -27,14 +26,14 @@ class TetMesh:
     ``node_bubble`` links nodes to the packing's bubbles and their population events.
     """
 
-    points: np.ndarray         # (n, 3)
-    tets: np.ndarray           # (m, 4) int64, positively oriented
-    node_level: np.ndarray     # (n,) int8
-    node_entity: np.ndarray    # (n,) int64
+    points: np.ndarray  # (n, 3)
+    tets: np.ndarray  # (m, 4) int64, positively oriented
+    node_level: np.ndarray  # (n,) int8
+    node_entity: np.ndarray  # (n,) int64
     stats: dict = field(default_factory=dict)
     boundary: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     boundary_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    node_bubble: np.ndarray | None = None   # (n,) the packing's bubble id of each node, -1 for added nodes
+    node_bubble: np.ndarray | None = None  # (n,) the packing's bubble id of each node, -1 for added nodes
 
     def volumes(self) -> np.ndarray:
         return signed_volumes(self.points, self.tets)

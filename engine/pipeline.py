@@ -1,4 +1,5 @@
 """The whole chain: job -> geometry -> features -> sizing -> packing -> mesh -> files."""
+
 from __future__ import annotations
 
 import logging
@@ -12,30 +13,30 @@ from typing import NamedTuple
 import numpy as np
 
 from .acceptance import check_mesh
-from .exact import on_exact_surfaces
+from .atomic import write_all_or_nothing
+from .audit import Audit, audit_mesh, idle_patterns
+from .cad import CAD_FORMATS, load_cad
 from .errors import JobError, LimitError, MeshRejected
+from .exact import on_exact_surfaces
+from .fe import feature_groups, quadratic, tet_bodies
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
-from .cad import CAD_FORMATS, load_cad
-from .audit import Audit, audit_mesh, idle_patterns
-from .fe import feature_groups, quadratic, tet_bodies
-from .atomic import write_all_or_nothing
 from .io import FEModel, mesh_targets
 from .job import Job
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
-from .report import report_summary, report_targets
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
+from .report import report_summary, report_targets
 from .shapes import build_shape
 from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
 
 DEFAULT_MAX_ELEMENTS = 20_000_000
-SIZE_FROM_SCALE = 40.0   # default global size = model size (bounding-box diagonal) / this
+SIZE_FROM_SCALE = 40.0  # default global size = model size (bounding-box diagonal) / this
 
 
 @dataclass
@@ -52,7 +53,7 @@ class Result:
     audit: Audit | None = None
     conformity: dict = field(default_factory=dict)
     boundary: dict = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)   # for the report, beside the log
+    warnings: list[str] = field(default_factory=list)  # for the report, beside the log
 
 
 @contextmanager
@@ -67,9 +68,10 @@ def build_geometry(job: Job):
     if job.shape is not None:
         try:
             shape = build_shape(job.shape, job.shape_parameters)
-        except JobError as error:   # a shape's consistency check: locate it in the job file
-            raise JobError(error.what, where=error.where or job.where("geometry", "parameters"),
-                           fix=error.fix) from None
+        except JobError as error:  # a shape's consistency check: locate it in the job file
+            raise JobError(
+                error.what, where=error.where or job.where("geometry", "parameters"), fix=error.fix
+            ) from None
         features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
         features.lengths = dict(shape.lengths)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
@@ -85,8 +87,11 @@ def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
     placements = []
     if job.recipe is not None:
         if job.recipe not in kb.recipes:
-            raise JobError(f"unknown recipe '{job.recipe}'", where=job.where("recipe"),
-                           fix=f"known recipes: {', '.join(sorted(kb.recipes))}")
+            raise JobError(
+                f"unknown recipe '{job.recipe}'",
+                where=job.where("recipe"),
+                fix=f"known recipes: {', '.join(sorted(kb.recipes))}",
+            )
         placements += kb.recipes[job.recipe].placements
     placements += job.placements
     if not placements:
@@ -109,14 +114,22 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
     classify(features, kb.feature_kinds)
     placed = bind(kb, job_placements(job, kb), features, geometry, size)
     if not placed:
-        raise JobError("no pattern could be placed on this solid: the placements match none of its features",
-                       where=job.where("recipe") if job.recipe else job.where("place"),
-                       fix="add the base pattern 'uniform-domain' or place patterns with 'at:' on named features")
+        raise JobError(
+            "no pattern could be placed on this solid: the placements match none of its features",
+            where=job.where("recipe") if job.recipe else job.where("place"),
+            fix="add the base pattern 'uniform-domain' or place patterns with 'at:' on named features",
+        )
     return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size, features)
 
 
-def fe_model(job: Job, mesh: TetMesh, geometry: Geometry, features: Features, audit: Audit | None = None,
-             floor: float = QUADRATIC_FLOOR) -> FEModel:
+def fe_model(
+    job: Job,
+    mesh: TetMesh,
+    geometry: Geometry,
+    features: Features,
+    audit: Audit | None = None,
+    floor: float = QUADRATIC_FLOOR,
+) -> FEModel:
     """The mesh as the files hold it: the job's element order (10-node elements curved no further than a
     scaled Jacobian of ``floor``), the bodies' and features' named groups, the audit, and the cell field
     ``body`` (1-based)."""
@@ -131,15 +144,19 @@ def write_files(model: FEModel, summary: dict, job: Job, name: str) -> list[Path
     """The mesh in the job's formats, its audit legend and its report, all or none (engine/atomic.py)."""
     targets = mesh_targets(model, job.output_dir, name, job.output_formats)
     if model.legend is not None:
-        targets += report_targets(summary, model.legend, model.points, model.tets[:, :4], model.cell_data,
-                                  job.output_dir, name)
+        targets += report_targets(
+            summary, model.legend, model.points, model.tets[:, :4], model.cell_data, job.output_dir, name
+        )
     return write_all_or_nothing(targets)
 
 
 def describe_mesher_stats(stats: dict) -> str:
     """The mesher's counts and stage times as ``; key value, ...`` for the log."""
-    items = [f"{key.replace('_', ' ')} {value:.3g}" if isinstance(value, float) else f"{key.replace('_', ' ')} {value}"
-             for key, value in stats.items() if not isinstance(value, dict)]
+    items = [
+        f"{key.replace('_', ' ')} {value:.3g}" if isinstance(value, float) else f"{key.replace('_', ' ')} {value}"
+        for key, value in stats.items()
+        if not isinstance(value, dict)
+    ]
     items += [f"{key} {value:.2f} s" for key, value in stats.get("seconds", {}).items()]
     return "; " + ", ".join(items) if items else ""
 
@@ -150,16 +167,25 @@ def check_output_dir(job: Job) -> None:
     directory = Path(job.output_dir)
     where = job.where("output", "directory")
     if directory.exists() and not directory.is_dir():
-        raise JobError(f"the output folder '{directory}' is an existing file", where=where,
-                       fix="name a folder (output.directory or --out)")
+        raise JobError(
+            f"the output folder '{directory}' is an existing file",
+            where=where,
+            fix="name a folder (output.directory or --out)",
+        )
     for target in (directory / f"{job.output_name}.{suffix}" for suffix in job.output_formats):
         if target.is_dir():
-            raise JobError(f"the output file '{target}' is an existing folder", where=job.where("output", "name"),
-                           fix="remove it, or give another output.name or output folder")
+            raise JobError(
+                f"the output file '{target}' is an existing folder",
+                where=job.where("output", "name"),
+                fix="remove it, or give another output.name or output folder",
+            )
     existing = next(p for p in (directory, *directory.parents) if p.exists())
     if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
-        raise JobError(f"cannot write the output folder '{directory}': '{existing}' is not writable", where=where,
-                       fix="name a folder you can write (output.directory or --out)")
+        raise JobError(
+            f"cannot write the output folder '{directory}': '{existing}' is not writable",
+            where=where,
+            fix="name a folder you can write (output.directory or --out)",
+        )
 
 
 class Prepared(NamedTuple):
@@ -180,30 +206,46 @@ def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict 
     check_job_knowledge(job, kb)
     with stage("geometry", timings):
         geometry, features = build_geometry(job)
-    log.info("geometry: %s, %d faces, volume %.6g, %d corners, %d curves, %d patches, named: %s (%.2f s)",
-             job.shape or job.geometry_file, len(geometry.faces), geometry.volume, len(features.corners),
-             len(features.curves), len(features.patches), ", ".join(features.names) or "none", timings["geometry"])
+    log.info(
+        "geometry: %s, %d faces, volume %.6g, %d corners, %d curves, %d patches, named: %s (%.2f s)",
+        job.shape or job.geometry_file,
+        len(geometry.faces),
+        geometry.volume,
+        len(features.corners),
+        len(features.curves),
+        len(features.patches),
+        ", ".join(features.names) or "none",
+        timings["geometry"],
+    )
     with stage("sizing", timings):
         sizing = build_sizing(job, geometry, features, kb)
         try:
             expected = check_element_limit(sizing, max_elements)
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
-    log.info("sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected "
-             "(%.2f s)", len(sizing.placed), ", ".join(p.id for p in sizing.placed), sizing.global_size,
-             sizing.h_min, sizing.h_max, expected, timings["sizing"])
+    log.info(
+        "sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected (%.2f s)",
+        len(sizing.placed),
+        ", ".join(p.id for p in sizing.placed),
+        sizing.global_size,
+        sizing.h_min,
+        sizing.h_max,
+        expected,
+        timings["sizing"],
+    )
     return Prepared(kb, geometry, features, sizing)
 
 
-def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True,
-        keep_invalid: bool = False) -> Result:
+def run(
+    job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True, keep_invalid: bool = False
+) -> Result:
     """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
     outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
     or, with ``keep_invalid``, writes the files as ``<name>.invalid.*`` first."""
     timings: dict = {}
     if write:
         check_output_dir(job)
-    packer, mesher = get_packer(job.packer), get_mesher(job.mesher)   # the plug-ins' contracts, before any work
+    packer, mesher = get_packer(job.packer), get_mesher(job.mesher)  # the plug-ins' contracts, before any work
     kb, geometry, features, sizing = prepare(job, max_elements, timings)
     with stage("packing", timings):
         packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
@@ -211,69 +253,143 @@ def run(job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = T
     with stage("meshing", timings):
         try:
             mesh = mesher(packing, geometry, features, seed=job.seed)
-        except RuntimeError as error:    # the nodes do not make a mesh of this solid
-            raise MeshRejected(f"the {job.mesher} mesher made no valid mesh of the {len(packing)} nodes of the "
-                               f"{job.packer} packer: {error}", check="meshing",
-                               fix="if the job replaces the population rules or uses a plug-in packer or mesher, "
-                                   "check them; else mesh again with another seed and report the input") from None
-    log.info("meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)", job.mesher,
-             len(mesh.points), len(mesh.tets), mesh.volume, geometry.volume,
-             100 * (mesh.volume / geometry.volume - 1), describe_mesher_stats(mesh.stats), timings["meshing"])
+        except RuntimeError as error:  # the nodes do not make a mesh of this solid
+            raise MeshRejected(
+                f"the {job.mesher} mesher made no valid mesh of the {len(packing)} nodes of the "
+                f"{job.packer} packer: {error}",
+                check="meshing",
+                fix="if the job replaces the population rules or uses a plug-in packer or mesher, "
+                "check them; else mesh again with another seed and report the input",
+            ) from None
+    log.info(
+        "meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)",
+        job.mesher,
+        len(mesh.points),
+        len(mesh.tets),
+        mesh.volume,
+        geometry.volume,
+        100 * (mesh.volume / geometry.volume - 1),
+        describe_mesher_stats(mesh.stats),
+        timings["meshing"],
+    )
     with stage("exact", timings):
         mesh, moved = on_exact_surfaces(mesh, geometry, features)
-    log.info("exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder, sphere or cone; %d nodes moved "
-             "onto them, at most %.3g%s (%.2f s)", moved["exact_patches"], moved["patches"], moved["exact_curves"],
-             moved["curves"], moved["nodes_moved"], moved["largest_move"],
-             f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
-             if moved["nodes_kept_for_validity"] else "", timings["exact"])
+    log.info(
+        "exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder, sphere or cone; %d nodes moved "
+        "onto them, at most %.3g%s (%.2f s)",
+        moved["exact_patches"],
+        moved["patches"],
+        moved["exact_curves"],
+        moved["curves"],
+        moved["nodes_moved"],
+        moved["largest_move"],
+        f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
+        if moved["nodes_kept_for_validity"]
+        else "",
+        timings["exact"],
+    )
     with stage("quality", timings):
         elements = tet_quality(mesh.points, mesh.tets)
         quality = elements.summary()
     below = quality["below"]
-    log.info("quality: min dihedral %.2f deg (1st percentile %.2f), %d below 10 deg, %d below 5 deg; "
-             "radius ratio min %.3f, %d below 0.1 (%.2f s)", quality["min_dihedral"]["min"],
-             quality["min_dihedral"]["p01"], below["min_dihedral_10"], below["min_dihedral_5"],
-             quality["radius_ratio"]["min"], below["radius_ratio_0.1"], timings["quality"])
+    log.info(
+        "quality: min dihedral %.2f deg (1st percentile %.2f), %d below 10 deg, %d below 5 deg; "
+        "radius ratio min %.3f, %d below 0.1 (%.2f s)",
+        quality["min_dihedral"]["min"],
+        quality["min_dihedral"]["p01"],
+        below["min_dihedral_10"],
+        below["min_dihedral_5"],
+        quality["radius_ratio"]["min"],
+        below["radius_ratio_0.1"],
+        timings["quality"],
+    )
     with stage("boundary", timings):
         boundary = boundary_report(mesh, geometry, sizing)
     there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
-    log.info("boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
-             "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g; area %+.3f %%, volume %+.3f %% of the "
-             "input's; triangle quality min %.3f (%.2f s)",
-             boundary["triangles"], "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
-             boundary["boundary_edges"], boundary["components"], there["max"], there["max_over_h"], there["mean"],
-             back["max"], back["max_over_h"], back["mean"], 100 * (boundary["area"] / boundary["input_area"] - 1),
-             100 * (boundary["volume"] / boundary["input_volume"] - 1), boundary["triangle_quality"]["min"],
-             timings["boundary"])
+    log.info(
+        "boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
+        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g; area %+.3f %%, volume %+.3f %% of the "
+        "input's; triangle quality min %.3f (%.2f s)",
+        boundary["triangles"],
+        "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
+        boundary["boundary_edges"],
+        boundary["components"],
+        there["max"],
+        there["max_over_h"],
+        there["mean"],
+        back["max"],
+        back["max_over_h"],
+        back["mean"],
+        100 * (boundary["area"] / boundary["input_area"] - 1),
+        100 * (boundary["volume"] / boundary["input_volume"] - 1),
+        boundary["triangle_quality"]["min"],
+        timings["boundary"],
+    )
     with stage("conformity", timings):
         conformity = size_conformity(mesh, sizing)
-    log.info("size conformity: edge length / target size median %.3f, %.1f %% within [%g, %g] (%s) (%.2f s)",
-             conformity["median"], 100 * conformity["within"], *conformity["band"],
-             ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items()
-                       if s["edges"]), timings["conformity"])
+    log.info(
+        "size conformity: edge length / target size median %.3f, %.1f %% within [%g, %g] (%s) (%.2f s)",
+        conformity["median"],
+        100 * conformity["within"],
+        *conformity["band"],
+        ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items() if s["edges"]),
+        timings["conformity"],
+    )
     with stage("audit", timings):
         audit = audit_mesh(mesh, sizing, packing, features, kb, str(job.source))
     shares = np.bincount(audit.cells["winner"] + 1, minlength=len(sizing.placed) + 1) / max(len(mesh.tets), 1)
-    winners = ", ".join(f"{name} {100 * share:.1f} %" for name, share in
-                        zip(["none"] + [p.id for p in sizing.placed], shares) if share > 0)
-    log.info("audit: %d elements sized by %s; %.1f %% lowered by more than %g %% by the gradation limit (%.2f s)",
-             len(mesh.tets), winners, 100 * np.mean(audit.cells["graded"]), 100 * GRADED_THRESHOLD, timings["audit"])
+    winners = ", ".join(
+        f"{name} {100 * share:.1f} %"
+        for name, share in zip(["none"] + [p.id for p in sizing.placed], shares)
+        if share > 0
+    )
+    log.info(
+        "audit: %d elements sized by %s; %.1f %% lowered by more than %g %% by the gradation limit (%.2f s)",
+        len(mesh.tets),
+        winners,
+        100 * np.mean(audit.cells["graded"]),
+        100 * GRADED_THRESHOLD,
+        timings["audit"],
+    )
     warnings = idle_patterns(audit.legend)
     for warning in warnings:
         log.warning(warning)
-    result = Result(job, geometry, features, sizing, packing, mesh, timings, quality=quality, audit=audit,
-                    conformity=conformity, boundary=boundary, warnings=warnings)
+    result = Result(
+        job,
+        geometry,
+        features,
+        sizing,
+        packing,
+        mesh,
+        timings,
+        quality=quality,
+        audit=audit,
+        conformity=conformity,
+        boundary=boundary,
+        warnings=warnings,
+    )
     tolerances = kb.sizing["acceptance"]
-    model = fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian) \
-        if write or job.output_order == 2 else None
+    model = (
+        fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian)
+        if write or job.output_order == 2
+        else None
+    )
     with stage("acceptance", timings):
         try:
-            check_mesh(mesh, geometry, features, elements, boundary, tolerances,
-                       scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None)
+            check_mesh(
+                mesh,
+                geometry,
+                features,
+                elements,
+                boundary,
+                tolerances,
+                scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None,
+            )
         except MeshRejected:
             if write and keep_invalid:
-                files = write_files(model, {**report_summary(result), "warnings": warnings}, job,
-                                    f"{job.output_name}.invalid")
+                files = write_files(
+                    model, {**report_summary(result), "warnings": warnings}, job, f"{job.output_name}.invalid"
+                )
                 log.warning("kept the rejected mesh for inspection: %s", ", ".join(map(str, files)))
             raise
     log.info("acceptance: passed (%.2f s)", timings["acceptance"])

@@ -4,6 +4,7 @@ A job names them (``packer:``, ``mesher:``); built-ins register by decorator, ot
 groups ``fuzzymesh.packers`` and ``fuzzymesh.meshers`` (engine/registry.py). docs/plugins.md has a worked
 example; tests/test_meshers.py runs the contract tests on every registered one, plug-ins included.
 """
+
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol
@@ -29,8 +30,9 @@ class Packer(Protocol):
     history) are optional.
     """
 
-    def __call__(self, geometry: Geometry, features: Features, sizing: SizingField, *, seed: int,
-                 knowledge: KnowledgeBase) -> Packing: ...
+    def __call__(
+        self, geometry: Geometry, features: Features, sizing: SizingField, *, seed: int, knowledge: KnowledgeBase
+    ) -> Packing: ...
 
 
 class Mesher(Protocol):

@@ -1,4 +1,5 @@
 """Progress bars for long stages: shown on a terminal, silent with --quiet or when stderr is not a TTY."""
+
 from __future__ import annotations
 
 import logging

@@ -5,6 +5,7 @@ Written in the degree-3 Bernstein basis, its 20 coefficients bound it: every val
 smallest and the largest coefficient, and the 4 vertex coefficients are the values at the corners
 (Johnen, Remacle, Geuzaine 2013). Nodes are in VTK / meshio / Abaqus C3D10 order (``engine.fe.TET10_EDGES``).
 """
+
 from __future__ import annotations
 
 from itertools import product
@@ -12,22 +13,26 @@ from math import factorial
 
 import numpy as np
 
-QUADRATIC_FLOOR = 0.2   # the smallest scaled Jacobian a curved 10-node element may have
+QUADRATIC_FLOOR = 0.2  # the smallest scaled Jacobian a curved 10-node element may have
 
 
 def _gradients(r: float, s: float, t: float) -> np.ndarray:
     """(10, 3) gradients of the 10-node shape functions at reference point (r, s, t)."""
     u = 1 - r - s - t
-    return np.array([
-        [-(4 * u - 1), -(4 * u - 1), -(4 * u - 1)],
-        [4 * r - 1, 0, 0], [0, 4 * s - 1, 0], [0, 0, 4 * t - 1],
-        [4 * (u - r), -4 * r, -4 * r],
-        [4 * s, 4 * r, 0],
-        [-4 * s, 4 * (u - s), -4 * s],
-        [-4 * t, -4 * t, 4 * (u - t)],
-        [4 * t, 0, 4 * r],
-        [0, 4 * t, 4 * s],
-    ])
+    return np.array(
+        [
+            [-(4 * u - 1), -(4 * u - 1), -(4 * u - 1)],
+            [4 * r - 1, 0, 0],
+            [0, 4 * s - 1, 0],
+            [0, 0, 4 * t - 1],
+            [4 * (u - r), -4 * r, -4 * r],
+            [4 * s, 4 * r, 0],
+            [-4 * s, 4 * (u - s), -4 * s],
+            [-4 * t, -4 * t, 4 * (u - t)],
+            [4 * t, 0, 4 * r],
+            [0, 4 * t, 4 * s],
+        ]
+    )
 
 
 def _bernstein():
@@ -35,20 +40,20 @@ def _bernstein():
     its points (index / 3) to the Bernstein coefficients."""
     lattice = np.array([a for a in product(range(4), repeat=4) if sum(a) == 3])
     weight = np.array([factorial(3) / np.prod([factorial(k) for k in a]) for a in lattice])
-    values = weight * np.prod((lattice[:, None, :] / 3.0) ** lattice[None, :, :], axis=2)   # B_q at point p
+    values = weight * np.prod((lattice[:, None, :] / 3.0) ** lattice[None, :, :], axis=2)  # B_q at point p
     return lattice, np.linalg.inv(values)
 
 
 LATTICE, TO_BERNSTEIN = _bernstein()
-LATTICE_GRADIENTS = np.array([_gradients(*(a[1:] / 3.0)) for a in LATTICE])   # (20, 10, 3)
+LATTICE_GRADIENTS = np.array([_gradients(*(a[1:] / 3.0)) for a in LATTICE])  # (20, 10, 3)
 
 
 def jacobians(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
     """(m, 20) Jacobian determinants of each 10-node tet at the degree-3 lattice points (``LATTICE`` / 3)."""
-    x = points[tets10]                                                   # (m, 10, 3)
+    x = points[tets10]  # (m, 10, 3)
     out = np.empty((len(tets10), len(LATTICE)))
     for p, gradient in enumerate(LATTICE_GRADIENTS):
-        columns = np.einsum("mai,aj->jmi", x, gradient)                  # dx/dr, dx/ds, dx/dt: (3, m, 3)
+        columns = np.einsum("mai,aj->jmi", x, gradient)  # dx/dr, dx/ds, dx/dt: (3, m, 3)
         out[:, p] = np.einsum("mi,mi->m", columns[0], np.cross(columns[1], columns[2]))
     return out
 

@@ -5,6 +5,7 @@ tetrahedron), mean ratio eta = 12 (3|V|)^(2/3) / sum of squared edge lengths, di
 degrees (70.53 for the regular tetrahedron), aspect ratio = longest edge / (2 sqrt(6) r_in) (1 for
 the regular tetrahedron). Volumes are signed: positive for positively oriented tetrahedra.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._numba import numba
-from .mesh import FACES   # face k is opposite vertex k
+from .mesh import FACES  # face k is opposite vertex k
 
 EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 # the two faces meeting at edge e are the faces opposite the edge's two other vertices
@@ -30,28 +31,46 @@ class TetQuality:
 
     def summary(self) -> dict:
         """Extremes, percentiles and counts below the usual thresholds."""
+
         def stats(a):
-            return {"min": float(a.min()), "p01": float(np.percentile(a, 1)), "median": float(np.median(a)),
-                    "max": float(a.max())}
+            return {
+                "min": float(a.min()),
+                "p01": float(np.percentile(a, 1)),
+                "median": float(np.median(a)),
+                "max": float(a.max()),
+            }
+
         return {
             "tetrahedra": len(self.volume),
-            "volume": {**stats(self.volume), "total": float(self.volume.sum()),
-                       "non_positive": int((self.volume <= 0).sum())},
-            "radius_ratio": stats(self.radius_ratio), "mean_ratio": stats(self.mean_ratio),
-            "min_dihedral": stats(self.min_dihedral), "max_dihedral": stats(self.max_dihedral),
+            "volume": {
+                **stats(self.volume),
+                "total": float(self.volume.sum()),
+                "non_positive": int((self.volume <= 0).sum()),
+            },
+            "radius_ratio": stats(self.radius_ratio),
+            "mean_ratio": stats(self.mean_ratio),
+            "min_dihedral": stats(self.min_dihedral),
+            "max_dihedral": stats(self.max_dihedral),
             "aspect_ratio": stats(self.aspect_ratio),
-            "below": {"min_dihedral_5": int((self.min_dihedral < 5).sum()),
-                      "min_dihedral_10": int((self.min_dihedral < 10).sum()),
-                      "max_dihedral_165": int((self.max_dihedral > 165).sum()),
-                      "radius_ratio_0.1": int((self.radius_ratio < 0.1).sum()),
-                      "radius_ratio_0.3": int((self.radius_ratio < 0.3).sum())},
+            "below": {
+                "min_dihedral_5": int((self.min_dihedral < 5).sum()),
+                "min_dihedral_10": int((self.min_dihedral < 10).sum()),
+                "max_dihedral_165": int((self.max_dihedral > 165).sum()),
+                "radius_ratio_0.1": int((self.radius_ratio < 0.1).sum()),
+                "radius_ratio_0.3": int((self.radius_ratio < 0.3).sum()),
+            },
         }
 
 
 def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
     """All metrics for every tetrahedron."""
-    out = _metrics(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets, dtype=np.int64),
-                   FACES, EDGES, OPPOSITE)
+    out = _metrics(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(tets, dtype=np.int64),
+        FACES,
+        EDGES,
+        OPPOSITE,
+    )
     return TetQuality(*out)
 
 
@@ -72,8 +91,11 @@ def _metrics(points, tets, faces, edges, opposite):
         ab = p[1] - p[0]
         ac = p[2] - p[0]
         ad = p[3] - p[0]
-        vol = (ab[0] * (ac[1] * ad[2] - ac[2] * ad[1]) - ab[1] * (ac[0] * ad[2] - ac[2] * ad[0])
-               + ab[2] * (ac[0] * ad[1] - ac[1] * ad[0])) / 6.0
+        vol = (
+            ab[0] * (ac[1] * ad[2] - ac[2] * ad[1])
+            - ab[1] * (ac[0] * ad[2] - ac[2] * ad[0])
+            + ab[2] * (ac[0] * ad[1] - ac[1] * ad[0])
+        ) / 6.0
         volume[t] = vol
         absvol = abs(vol)
         normals = np.empty((4, 3))
@@ -133,7 +155,6 @@ def surface_distances(points: np.ndarray, triangles: np.ndarray, surface, size, 
     ``at`` is the sample with the largest distance / h and ``at_distance`` its distance.
     """
     import igl
-
     import trimesh
 
     used, local = np.unique(triangles, return_inverse=True)
@@ -143,15 +164,22 @@ def surface_distances(points: np.ndarray, triangles: np.ndarray, surface, size, 
     for name, (source, target) in sides.items():
         spread, _ = trimesh.sample.sample_surface(source, samples, seed=0)
         at = np.vstack([source.vertices, source.vertices[source.edges_unique].mean(axis=1), spread])
-        d2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(at, dtype=np.float64),
-                                                   np.ascontiguousarray(target.vertices, dtype=np.float64),
-                                                   np.ascontiguousarray(target.faces, dtype=np.int64))
+        d2, _, _ = igl.point_mesh_squared_distance(
+            np.ascontiguousarray(at, dtype=np.float64),
+            np.ascontiguousarray(target.vertices, dtype=np.float64),
+            np.ascontiguousarray(target.faces, dtype=np.int64),
+        )
         distance = np.sqrt(d2)
         ratio = distance / size(at)
         worst = int(np.argmax(ratio))
-        out[name] = {"max": float(distance.max()), "mean": float(distance.mean()),
-                     "RMS": float(np.sqrt(d2.mean())), "max_over_h": float(ratio[worst]),
-                     "at": at[worst].tolist(), "at_distance": float(distance[worst])}
+        out[name] = {
+            "max": float(distance.max()),
+            "mean": float(distance.mean()),
+            "RMS": float(np.sqrt(d2.mean())),
+            "max_over_h": float(ratio[worst]),
+            "at": at[worst].tolist(),
+            "at_distance": float(distance[worst]),
+        }
     return out
 
 
@@ -168,14 +196,19 @@ def surface_deviation(mesh, geometry, sizing, samples: int = 400_000) -> dict:
     boundary = mesh.boundary if len(mesh.boundary) else mesh.boundary_faces()
     distances = surface_distances(mesh.points, boundary, surface, sizing, samples)["input_to_mesh"]
     nodes = np.unique(boundary)
-    n2, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(mesh.points[nodes], dtype=np.float64),
-                                               np.ascontiguousarray(surface.vertices, dtype=np.float64),
-                                               np.ascontiguousarray(surface.faces, dtype=np.int64))
-    return {"input_to_mesh": distances["max"], "input_to_mesh_over_h": distances["max_over_h"],
-            "nodes_off_surface": float(np.sqrt(n2.max()))}
+    n2, _, _ = igl.point_mesh_squared_distance(
+        np.ascontiguousarray(mesh.points[nodes], dtype=np.float64),
+        np.ascontiguousarray(surface.vertices, dtype=np.float64),
+        np.ascontiguousarray(surface.faces, dtype=np.int64),
+    )
+    return {
+        "input_to_mesh": distances["max"],
+        "input_to_mesh_over_h": distances["max_over_h"],
+        "nodes_off_surface": float(np.sqrt(n2.max())),
+    }
 
 
-CONFORMITY_BAND = (0.7, 1.4)   # edge length / target size counted as conforming
+CONFORMITY_BAND = (0.7, 1.4)  # edge length / target size counted as conforming
 CONFORMITY_BINS = np.linspace(0.0, 3.0, 61)
 
 
@@ -183,21 +216,28 @@ def size_conformity(mesh, sizing) -> dict:
     """Edge length over the target size h at the edge's midpoint: median, share in CONFORMITY_BAND,
     histogram, and the same per winning pattern (by the sizing field's audited evaluation)."""
     pairs = np.sort(mesh.tets[:, EDGES].reshape(-1, 2), axis=1).astype(np.int64)
-    keys = np.sort(pairs[:, 0] * len(mesh.points) + pairs[:, 1])   # one int64 per edge, sorted: 3x faster
-    keys = keys[np.r_[True, keys[1:] != keys[:-1]]]                   # than np.unique's hash on 6M edges
+    keys = np.sort(pairs[:, 0] * len(mesh.points) + pairs[:, 1])  # one int64 per edge, sorted: 3x faster
+    keys = keys[np.r_[True, keys[1:] != keys[:-1]]]  # than np.unique's hash on 6M edges
     a, b = mesh.points[keys // len(mesh.points)], mesh.points[keys % len(mesh.points)]
     evaluation = sizing.evaluate((a + b) / 2)
     ratio = np.linalg.norm(b - a, axis=1) / evaluation.h
     low, high = CONFORMITY_BAND
 
     def stats(r):
-        return {"edges": int(len(r)), "median": float(np.median(r)) if len(r) else None,
-                "within": float(np.mean((r >= low) & (r <= high))) if len(r) else None}
+        return {
+            "edges": int(len(r)),
+            "median": float(np.median(r)) if len(r) else None,
+            "within": float(np.mean((r >= low) & (r <= high))) if len(r) else None,
+        }
 
     by_pattern = {p.id: stats(ratio[evaluation.winner == k]) for k, p in enumerate(sizing.placed)}
     counts, _ = np.histogram(np.clip(ratio, CONFORMITY_BINS[0], CONFORMITY_BINS[-1]), CONFORMITY_BINS)
-    return {**stats(ratio), "band": [low, high], "by_pattern": by_pattern,
-            "histogram": {"bins": CONFORMITY_BINS.tolist(), "counts": counts.tolist()}}
+    return {
+        **stats(ratio),
+        "band": [low, high],
+        "by_pattern": by_pattern,
+        "histogram": {"bins": CONFORMITY_BINS.tolist(), "counts": counts.tolist()},
+    }
 
 
 # Hausdorff samples per boundary triangle, at least and at most: on the paper-scale cylinder (1,178 boundary
@@ -232,13 +272,19 @@ def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
     distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples)
     return {
         "triangles": int(len(boundary)),
-        "triangle_quality": {"min": float(triangle_quality.min()), "median": float(np.median(triangle_quality)),
-                             "below_0.3": int((triangle_quality < 0.3).sum())},
-        "hausdorff_input_to_mesh": distances["input_to_mesh"], "hausdorff_mesh_to_input": distances["mesh_to_input"],
+        "triangle_quality": {
+            "min": float(triangle_quality.min()),
+            "median": float(np.median(triangle_quality)),
+            "below_0.3": int((triangle_quality < 0.3).sum()),
+        },
+        "hausdorff_input_to_mesh": distances["input_to_mesh"],
+        "hausdorff_mesh_to_input": distances["mesh_to_input"],
         "two_manifold": bool(topology["is_mesh_two_manifold"]),
         "boundary_edges": int(topology["boundary_edges"]),
         "components": int(topology["connected_components_number"]),
         "holes": int(topology["number_holes"]) if topology.get("number_holes", -1) >= 0 else 0,
-        "area": float(measures["surface_area"]), "input_area": float(reference["surface_area"]),
-        "volume": float(measures.get("mesh_volume", np.nan)), "input_volume": float(reference.get("mesh_volume", np.nan)),
+        "area": float(measures["surface_area"]),
+        "input_area": float(reference["surface_area"]),
+        "volume": float(measures.get("mesh_volume", np.nan)),
+        "input_volume": float(reference.get("mesh_volume", np.nan)),
     }

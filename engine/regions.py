@@ -1,5 +1,6 @@
 """Regions a pattern can be placed in (a box, a sphere or a cylinder), checked and measured with numpy alone,
 so that the knowledge base and lint validate them without a geometry library."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,15 +15,18 @@ class RegionDistance:
     def __init__(self, spec: dict, where: str):
         if not isinstance(spec, dict) or len(spec) != 1:
             raise KnowledgeError("a region is one of {box: ...}, {sphere: ...}, {cylinder: ...}", where=where)
-        (self.kind, body), = spec.items()
+        ((self.kind, body),) = spec.items()
         vec = Field(LIST, required=True, items=Field(NUMBER))
-        fields = {"box": {"min": vec, "max": vec},
-                  "sphere": {"centre": vec, "radius": Field(NUMBER, required=True, check=positive)},
-                  "cylinder": {"start": vec, "end": vec, "radius": Field(NUMBER, required=True, check=positive)}}
+        fields = {
+            "box": {"min": vec, "max": vec},
+            "sphere": {"centre": vec, "radius": Field(NUMBER, required=True, check=positive)},
+            "cylinder": {"start": vec, "end": vec, "radius": Field(NUMBER, required=True, check=positive)},
+        }
         if self.kind not in fields:
             raise KnowledgeError(f"unknown region '{self.kind}'", where=where, fix="use box, sphere or cylinder")
-        values = check_value(body, Field("mapping", fields=fields[self.kind]), f"region.{self.kind}", where,
-                             KnowledgeError)
+        values = check_value(
+            body, Field("mapping", fields=fields[self.kind]), f"region.{self.kind}", where, KnowledgeError
+        )
         for key, value in values.items():
             if isinstance(value, list) and len(value) != 3:
                 raise KnowledgeError(f"region.{self.kind}.{key} needs three coordinates", where=where)

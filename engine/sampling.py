@@ -4,11 +4,11 @@ Two points conflict when they are closer than the mean of their exclusion
 radii. :func:`thin` keeps a maximal set of points with no conflicts, always
 keeping the ``fixed`` ones, preferring higher random priority (seeded).
 """
+
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial import cKDTree
-
 
 
 def conflict_pairs(points: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -40,13 +40,14 @@ def conflict_pairs(points: np.ndarray, radius: np.ndarray) -> tuple[np.ndarray, 
     return np.concatenate([i, j]), np.concatenate([j, i])
 
 
-def thin(points: np.ndarray, radius: np.ndarray, rng: np.random.Generator,
-         fixed: np.ndarray | None = None) -> np.ndarray:
+def thin(
+    points: np.ndarray, radius: np.ndarray, rng: np.random.Generator, fixed: np.ndarray | None = None
+) -> np.ndarray:
     """Boolean mask of a maximal conflict-free subset that contains every fixed point."""
     n = len(points)
     fixed = np.zeros(n, bool) if fixed is None else fixed
     a, b = conflict_pairs(points, radius)
-    state = np.zeros(n, dtype=np.int8)            # 0 undecided, 1 kept, -1 dropped
+    state = np.zeros(n, dtype=np.int8)  # 0 undecided, 1 kept, -1 dropped
     state[fixed] = 1
     state[b[fixed[a] & ~fixed[b]]] = -1
     priority = rng.random(n)

@@ -5,6 +5,7 @@ A schema is a dict ``key -> Field``. :func:`validate` checks a
 with defaults filled in. Every error names ``file:line:col``, what is wrong
 and what is allowed.
 """
+
 from __future__ import annotations
 
 import math
@@ -100,6 +101,7 @@ def in_range(lo: float, hi: float) -> Callable[[Any], str | None]:
         if not (lo <= value <= hi):
             return f"must be between {lo} and {hi}, got {value}"
         return None
+
     return check
 
 
@@ -116,15 +118,17 @@ def validate(mapping, schema: dict, error=FuzzymeshError, context: str = "", whe
     allowed = ", ".join(schema)
     for key in mapping:
         if key not in schema:
-            raise error(f"unknown key '{key}' {label}", where=mapping.where(key),
-                        fix=f"allowed keys: {allowed}")
+            raise error(f"unknown key '{key}' {label}", where=mapping.where(key), fix=f"allowed keys: {allowed}")
     out = {}
     for key, spec in schema.items():
         name = f"{context}.{key}" if context else str(key)
         if key not in mapping or mapping[key] is None and spec.required:
             if spec.required:
-                raise error(f"missing key '{key}' {label}", where=mapping.where(),
-                            fix=f"add '{key}:' ({_kind_text(spec.kind)}){_doc(spec)}")
+                raise error(
+                    f"missing key '{key}' {label}",
+                    where=mapping.where(),
+                    fix=f"add '{key}:' ({_kind_text(spec.kind)}){_doc(spec)}",
+                )
             out[key] = spec.default
             continue
         out[key] = check_value(mapping[key], spec, name, mapping.where(key), error)
@@ -144,19 +148,25 @@ def check_value(value, spec: Field, name: str, where: str, error=FuzzymeshError)
     """Check one value against its Field; return the validated value."""
     kinds = spec.kind if isinstance(spec.kind, tuple) else (spec.kind,)
     if not any(_type_ok(k, value) for k in kinds):
-        raise error(f"'{name}' must be {_kind_text(spec.kind)}, got {_describe(value)}", where=where,
-                    fix=spec.doc or None)
+        raise error(
+            f"'{name}' must be {_kind_text(spec.kind)}, got {_describe(value)}", where=where, fix=spec.doc or None
+        )
     if spec.choices is not None and value not in spec.choices:
-        raise error(f"'{name}' is '{value}', which is not known", where=where,
-                    fix=f"choose one of: {', '.join(map(str, spec.choices))}")
+        raise error(
+            f"'{name}' is '{value}', which is not known",
+            where=where,
+            fix=f"choose one of: {', '.join(map(str, spec.choices))}",
+        )
     if isinstance(value, dict):
         if spec.fields is not None:
             value = validate(value, spec.fields, error, name, where)
         elif not spec.open_keys:
             value = dict(value)
     elif isinstance(value, list) and spec.items is not None:
-        value = [check_value(v, spec.items, f"{name}[{i}]", getattr(v, "where", lambda: where)(), error)
-                 for i, v in enumerate(value)]
+        value = [
+            check_value(v, spec.items, f"{name}[{i}]", getattr(v, "where", lambda: where)(), error)
+            for i, v in enumerate(value)
+        ]
     if spec.check is not None:
         problem = spec.check(value)
         if problem:

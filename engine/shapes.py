@@ -7,6 +7,7 @@ applied to the detected features (e.g. the circle where the cylinder meets the
 plate is ``junction``). A shape may also carry curves that are not surface
 edges, such as a crack front inside a plate.
 """
+
 from __future__ import annotations
 
 import math
@@ -66,6 +67,7 @@ def _tol(size: float) -> float:
 def plane_patch(axis: int, value: float, sign: int, tol: float) -> Callable:
     def test(patch):
         return patch.normal[axis] * sign > 0.999 and abs(patch.centroid[axis] - value) < tol
+
     return test
 
 
@@ -74,8 +76,12 @@ def circle_curve(centre, radius: float, tol: float) -> Callable:
 
     def test(curve):
         c = curve.circle
-        return c is not None and abs(c.radius - radius) < tol + CHORDAL_ERROR * radius \
+        return (
+            c is not None
+            and abs(c.radius - radius) < tol + CHORDAL_ERROR * radius
             and np.linalg.norm(c.centre - centre) < tol + CHORDAL_ERROR * radius
+        )
+
     return test
 
 
@@ -88,6 +94,7 @@ def cylindrical_patch(point, axis, radius: float, tol: float) -> Callable:
         rel = patch.vertices - point
         dist = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
         return bool(np.all(np.abs(dist - radius) < tol + CHORDAL_ERROR * radius))
+
     return test
 
 
@@ -99,21 +106,29 @@ def on_cylinder(point, axis, radius: float, tol: float) -> Callable:
         rel = triangles - point
         dist = np.linalg.norm(rel - (rel @ axis)[..., None] * axis, axis=2)
         return np.all(np.abs(dist - radius) < tol + CHORDAL_ERROR * radius, axis=1)
+
     return select
 
 
 def box_faces(lo, hi, prefix: str = "") -> list[NameRule]:
     """Rules naming the six planar faces of a box: x-min, x-max, ..., bottom (z-min), top (z-max)."""
     tol = _tol(float(np.max(np.subtract(hi, lo))))
-    names = [("x-min", 0, lo[0], -1), ("x-max", 0, hi[0], 1), ("y-min", 1, lo[1], -1),
-             ("y-max", 1, hi[1], 1), ("bottom", 2, lo[2], -1), ("top", 2, hi[2], 1)]
+    names = [
+        ("x-min", 0, lo[0], -1),
+        ("x-max", 0, hi[0], 1),
+        ("y-min", 1, lo[1], -1),
+        ("y-max", 1, hi[1], 1),
+        ("bottom", 2, lo[2], -1),
+        ("top", 2, hi[2], 1),
+    ]
     return [NameRule(prefix + n, "patch", plane_patch(a, v, s, tol)) for n, a, v, s in names]
 
 
 def _geometry(solid: m3.Manifold, kind: str) -> Geometry:
     mesh = solid.to_mesh()
-    return validate_surface(mesh.vert_properties[:, :3], mesh.tri_verts, f"shape '{kind}'",
-                            check_self_intersections=False)
+    return validate_surface(
+        mesh.vert_properties[:, :3], mesh.tri_verts, f"shape '{kind}'", check_self_intersections=False
+    )
 
 
 def _box(lx, ly, lz) -> m3.Manifold:
@@ -124,46 +139,64 @@ def cylinder(radius: float, height: float) -> Shape:
     """Solid circular cylinder on the z=0 plane, axis z (the paper's Fig. 7)."""
     solid = m3.Manifold.cylinder(height, radius, radius, segments_for())
     tol = _tol(max(radius, height))
-    rules = [NameRule("bottom", "patch", plane_patch(2, 0.0, -1, tol)),
-             NameRule("top", "patch", plane_patch(2, height, 1, tol)),
-             NameRule("side", "patch", cylindrical_patch([0, 0, 0], [0, 0, 1], radius, tol)),
-             NameRule("bottom-edge", "curve", circle_curve([0, 0, 0], radius, tol)),
-             NameRule("top-edge", "curve", circle_curve([0, 0, height], radius, tol))]
-    return Shape("cylinder", dict(radius=radius, height=height), _geometry(solid, "cylinder"), rules,
-                 lengths=dict(radius=radius, height=height))
+    rules = [
+        NameRule("bottom", "patch", plane_patch(2, 0.0, -1, tol)),
+        NameRule("top", "patch", plane_patch(2, height, 1, tol)),
+        NameRule("side", "patch", cylindrical_patch([0, 0, 0], [0, 0, 1], radius, tol)),
+        NameRule("bottom-edge", "curve", circle_curve([0, 0, 0], radius, tol)),
+        NameRule("top-edge", "curve", circle_curve([0, 0, height], radius, tol)),
+    ]
+    return Shape(
+        "cylinder",
+        dict(radius=radius, height=height),
+        _geometry(solid, "cylinder"),
+        rules,
+        lengths=dict(radius=radius, height=height),
+    )
 
 
 def plate(length: float, width: float, thickness: float) -> Shape:
     """Rectangular plate centred on the z axis, bottom face on z=0."""
     solid = _box(length, width, thickness)
     lo, hi = [-length / 2, -width / 2, 0], [length / 2, width / 2, thickness]
-    return Shape("plate", dict(length=length, width=width, thickness=thickness), _geometry(solid, "plate"),
-                 box_faces(lo, hi), lengths=dict(thickness=thickness))
+    return Shape(
+        "plate",
+        dict(length=length, width=width, thickness=thickness),
+        _geometry(solid, "plate"),
+        box_faces(lo, hi),
+        lengths=dict(thickness=thickness),
+    )
 
 
-def plate_with_hole(length: float, width: float, thickness: float, hole_radius: float,
-                    hole_x: float, hole_y: float) -> Shape:
+def plate_with_hole(
+    length: float, width: float, thickness: float, hole_radius: float, hole_x: float, hole_y: float
+) -> Shape:
     """Plate with a circular through hole (named ``hole``: its wall and both rims)."""
     if hole_radius >= min(width / 2 - abs(hole_y), length / 2 - abs(hole_x)):
-        raise JobError("the hole does not fit inside the plate",
-                       fix="make 'hole_radius' smaller or the plate larger")
-    hole = m3.Manifold.cylinder(thickness * 3, hole_radius, hole_radius, segments_for()) \
-        .translate([hole_x, hole_y, -thickness])
+        raise JobError("the hole does not fit inside the plate", fix="make 'hole_radius' smaller or the plate larger")
+    hole = m3.Manifold.cylinder(thickness * 3, hole_radius, hole_radius, segments_for()).translate(
+        [hole_x, hole_y, -thickness]
+    )
     solid = _box(length, width, thickness) - hole
     tol = _tol(max(length, width))
     lo, hi = [-length / 2, -width / 2, 0], [length / 2, width / 2, thickness]
     rules = box_faces(lo, hi) + [
         NameRule("hole", "patch", cylindrical_patch([hole_x, hole_y, 0], [0, 0, 1], hole_radius, tol)),
         NameRule("hole", "curve", circle_curve([hole_x, hole_y, 0], hole_radius, tol)),
-        NameRule("hole", "curve", circle_curve([hole_x, hole_y, thickness], hole_radius, tol))]
-    return Shape("plate_with_hole", dict(length=length, width=width, thickness=thickness, hole_radius=hole_radius,
-                                         hole_x=hole_x, hole_y=hole_y),
-                 _geometry(solid, "plate_with_hole"), rules,
-                 lengths=dict(thickness=thickness, hole_radius=hole_radius, width=width))
+        NameRule("hole", "curve", circle_curve([hole_x, hole_y, thickness], hole_radius, tol)),
+    ]
+    return Shape(
+        "plate_with_hole",
+        dict(length=length, width=width, thickness=thickness, hole_radius=hole_radius, hole_x=hole_x, hole_y=hole_y),
+        _geometry(solid, "plate_with_hole"),
+        rules,
+        lengths=dict(thickness=thickness, hole_radius=hole_radius, width=width),
+    )
 
 
-def plate_cylinder_junction(length: float, width: float, thickness: float, radius: float, height: float,
-                            offset: float) -> Shape:
+def plate_cylinder_junction(
+    length: float, width: float, thickness: float, radius: float, height: float, offset: float
+) -> Shape:
     """Plate with a solid cylinder standing on its top face (the paper's Fig. 10).
 
     The cylinder axis is at x = ``offset`` from the plate centre: 0 stands it at
@@ -174,10 +207,12 @@ def plate_cylinder_junction(length: float, width: float, thickness: float, radiu
     """
     gap = length / 2 - abs(offset) - radius
     if gap <= 0 or radius >= width / 2:
-        raise JobError("the cylinder does not stand inside the plate",
-                       fix="make 'radius' or 'offset' smaller, or the plate larger")
-    cyl = m3.Manifold.cylinder(height + thickness / 2, radius, radius, segments_for()) \
-        .translate([offset, 0, thickness / 2])
+        raise JobError(
+            "the cylinder does not stand inside the plate", fix="make 'radius' or 'offset' smaller, or the plate larger"
+        )
+    cyl = m3.Manifold.cylinder(height + thickness / 2, radius, radius, segments_for()).translate(
+        [offset, 0, thickness / 2]
+    )
     solid = _box(length, width, thickness) + cyl
     tol = _tol(max(length, width, height))
     lo, hi = [-length / 2, -width / 2, 0], [length / 2, width / 2, thickness]
@@ -186,10 +221,16 @@ def plate_cylinder_junction(length: float, width: float, thickness: float, radiu
         NameRule("junction", "curve", circle_curve([offset, 0, thickness], radius, tol)),
         NameRule("plate-edge", "patch", plane_patch(0, side * length / 2, side, tol)),
         NameRule("cylinder", "patch", cylindrical_patch([offset, 0, 0], [0, 0, 1], radius, tol)),
-        NameRule("cylinder-top", "patch", plane_patch(2, thickness + height, 1, tol))]
+        NameRule("cylinder-top", "patch", plane_patch(2, thickness + height, 1, tol)),
+    ]
     params = dict(length=length, width=width, thickness=thickness, radius=radius, height=height, offset=offset)
-    return Shape("plate_cylinder_junction", params, _geometry(solid, "plate_cylinder_junction"), rules,
-                 lengths=dict(thickness=thickness, radius=radius, edge_gap=gap))
+    return Shape(
+        "plate_cylinder_junction",
+        params,
+        _geometry(solid, "plate_cylinder_junction"),
+        rules,
+        lengths=dict(thickness=thickness, radius=radius, edge_gap=gap),
+    )
 
 
 def l_bracket(leg_length: float, leg_height: float, thickness: float, width: float, fillet_radius: float) -> Shape:
@@ -201,8 +242,10 @@ def l_bracket(leg_length: float, leg_height: float, thickness: float, width: flo
     """
     t, r = thickness, fillet_radius
     if t >= min(leg_length, leg_height) or r >= min(leg_length, leg_height) - t:
-        raise JobError("the bracket profile is inconsistent",
-                       fix="thickness must be less than both legs, and fillet_radius less than each leg minus thickness")
+        raise JobError(
+            "the bracket profile is inconsistent",
+            fix="thickness must be less than both legs, and fillet_radius less than each leg minus thickness",
+        )
     n = segments_for(math.pi / 2)
     centre = np.array([t + r, t + r])
     angles = np.linspace(1.5 * math.pi, math.pi, n + 1)  # counter-clockwise: from (t+r, t) to (t, t+r)
@@ -213,22 +256,32 @@ def l_bracket(leg_length: float, leg_height: float, thickness: float, width: flo
     section = m3.CrossSection([profile.tolist()])
     solid = m3.Manifold.extrude(section, width).rotate([90, 0, 0]).translate([0, width / 2, 0])
     tol = _tol(max(leg_length, leg_height, width))
-    rules = [NameRule("base-bottom", "patch", plane_patch(2, 0, -1, tol)),
-             NameRule("upright-top", "patch", plane_patch(2, leg_height, 1, tol)),
-             NameRule("base-end", "patch", plane_patch(0, leg_length, 1, tol)),
-             NameRule("upright-back", "patch", plane_patch(0, 0, -1, tol))]
+    rules = [
+        NameRule("base-bottom", "patch", plane_patch(2, 0, -1, tol)),
+        NameRule("upright-top", "patch", plane_patch(2, leg_height, 1, tol)),
+        NameRule("base-end", "patch", plane_patch(0, leg_length, 1, tol)),
+        NameRule("upright-back", "patch", plane_patch(0, 0, -1, tol)),
+    ]
     groups = []
     if r > 0:
         rules.append(NameRule("fillet", "patch", cylindrical_patch([t + r, 0, t + r], [0, 1, 0], r, tol)))
         groups.append(on_cylinder([t + r, 0, t + r], [0, 1, 0], r, tol))
-    params = dict(leg_length=leg_length, leg_height=leg_height, thickness=thickness, width=width,
-                  fillet_radius=fillet_radius)
-    return Shape("l_bracket", params, _geometry(solid, "l_bracket"), rules,
-                 lengths=dict(thickness=t, fillet_radius=r), face_groups=groups)
+    params = dict(
+        leg_length=leg_length, leg_height=leg_height, thickness=thickness, width=width, fillet_radius=fillet_radius
+    )
+    return Shape(
+        "l_bracket",
+        params,
+        _geometry(solid, "l_bracket"),
+        rules,
+        lengths=dict(thickness=t, fillet_radius=r),
+        face_groups=groups,
+    )
 
 
-def cracked_plate(length: float, width: float, thickness: float, crack: str, crack_length: float,
-                  crack_depth: float) -> Shape:
+def cracked_plate(
+    length: float, width: float, thickness: float, crack: str, crack_length: float, crack_depth: float
+) -> Shape:
     """A plate with a crack front curve inside it (the solid is the uncracked plate).
 
     ``crack: straight`` is a through-thickness edge crack in the plane y=0 from
@@ -247,17 +300,26 @@ def cracked_plate(length: float, width: float, thickness: float, crack: str, cra
         front = np.column_stack([np.full_like(z, x), np.zeros_like(z), z])
     else:
         if crack_depth >= thickness or crack_length >= length / 2:
-            raise JobError("the semi-elliptical crack does not fit in the plate",
-                           fix="make 'crack_depth' less than the thickness and 'crack_length' less than half the length")
+            raise JobError(
+                "the semi-elliptical crack does not fit in the plate",
+                fix="make 'crack_depth' less than the thickness and 'crack_length' less than half the length",
+            )
         angles = np.linspace(0, math.pi, segments_for(math.pi) + 1)
-        front = np.column_stack([crack_length * np.cos(angles), np.zeros_like(angles),
-                                 thickness - crack_depth * np.sin(angles)])
+        front = np.column_stack(
+            [crack_length * np.cos(angles), np.zeros_like(angles), thickness - crack_depth * np.sin(angles)]
+        )
     lo, hi = [-length / 2, -width / 2, 0], [length / 2, width / 2, thickness]
-    params = dict(length=length, width=width, thickness=thickness, crack=crack, crack_length=crack_length,
-                  crack_depth=crack_depth)
-    return Shape("cracked_plate", params, _geometry(_box(length, width, thickness), "cracked_plate"),
-                 box_faces(lo, hi), [GivenCurve("crack-front", front)],
-                 lengths=dict(thickness=thickness, crack_length=crack_length))
+    params = dict(
+        length=length, width=width, thickness=thickness, crack=crack, crack_length=crack_length, crack_depth=crack_depth
+    )
+    return Shape(
+        "cracked_plate",
+        params,
+        _geometry(_box(length, width, thickness), "cracked_plate"),
+        box_faces(lo, hi),
+        [GivenCurve("crack-front", front)],
+        lengths=dict(thickness=thickness, crack_length=crack_length),
+    )
 
 
 def sphere_segments() -> int:
@@ -281,6 +343,7 @@ def spherical_patch(centre, radius: float, tol: float) -> Callable:
     def test(patch):
         dist = np.linalg.norm(patch.vertices - centre, axis=1)
         return not patch.planar and bool(np.all(np.abs(dist - radius) < tol + CHORDAL_ERROR * radius))
+
     return test
 
 
@@ -292,20 +355,28 @@ def hollow_sphere_octant(inner_radius: float, outer_radius: float) -> Shape:
     """
     a, b = inner_radius, outer_radius
     if a >= b:
-        raise JobError("the inner radius is not smaller than the outer radius",
-                       fix="make 'inner_radius' smaller than 'outer_radius'")
+        raise JobError(
+            "the inner radius is not smaller than the outer radius",
+            fix="make 'inner_radius' smaller than 'outer_radius'",
+        )
     segments = sphere_segments()
     shell = m3.Manifold.sphere(b, segments) - m3.Manifold.sphere(a, segments)
     solid = shell ^ m3.Manifold.cube([2 * b, 2 * b, 2 * b])
     tol = _tol(b)
-    rules = [NameRule("inner", "patch", spherical_patch([0, 0, 0], a, tol)),
-             NameRule("outer", "patch", spherical_patch([0, 0, 0], b, tol)),
-             NameRule("symmetry-x", "patch", plane_patch(0, 0.0, -1, tol)),
-             NameRule("symmetry-y", "patch", plane_patch(1, 0.0, -1, tol)),
-             NameRule("symmetry-z", "patch", plane_patch(2, 0.0, -1, tol))]
-    return Shape("hollow_sphere_octant", dict(inner_radius=a, outer_radius=b),
-                 _geometry(solid, "hollow_sphere_octant"), rules,
-                 lengths=dict(inner_radius=a, outer_radius=b, thickness=b - a))
+    rules = [
+        NameRule("inner", "patch", spherical_patch([0, 0, 0], a, tol)),
+        NameRule("outer", "patch", spherical_patch([0, 0, 0], b, tol)),
+        NameRule("symmetry-x", "patch", plane_patch(0, 0.0, -1, tol)),
+        NameRule("symmetry-y", "patch", plane_patch(1, 0.0, -1, tol)),
+        NameRule("symmetry-z", "patch", plane_patch(2, 0.0, -1, tol)),
+    ]
+    return Shape(
+        "hollow_sphere_octant",
+        dict(inner_radius=a, outer_radius=b),
+        _geometry(solid, "hollow_sphere_octant"),
+        rules,
+        lengths=dict(inner_radius=a, outer_radius=b, thickness=b - a),
+    )
 
 
 def _p(default, doc, check=positive):
@@ -314,30 +385,63 @@ def _p(default, doc, check=positive):
 
 SHAPES = {
     "cylinder": (cylinder, {"radius": _p(25.0, "cylinder radius"), "height": _p(100.0, "cylinder height")}),
-    "plate": (plate, {"length": _p(200.0, "plate length (x)"), "width": _p(200.0, "plate width (y)"),
-                      "thickness": _p(20.0, "plate thickness (z)")}),
-    "plate_with_hole": (plate_with_hole, {
-        "length": _p(200.0, "plate length (x)"), "width": _p(100.0, "plate width (y)"),
-        "thickness": _p(10.0, "plate thickness (z)"), "hole_radius": _p(10.0, "hole radius"),
-        "hole_x": _p(0.0, "hole centre x", finite), "hole_y": _p(0.0, "hole centre y", finite)}),
-    "plate_cylinder_junction": (plate_cylinder_junction, {
-        "length": _p(200.0, "plate length (x)"), "width": _p(200.0, "plate width (y)"),
-        "thickness": _p(20.0, "plate thickness (z)"), "radius": _p(25.0, "cylinder radius"),
-        "height": _p(100.0, "cylinder height above the plate"),
-        "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", finite)}),
-    "l_bracket": (l_bracket, {
-        "leg_length": _p(80.0, "base leg length (x)"), "leg_height": _p(80.0, "upright leg height (z)"),
-        "thickness": _p(15.0, "leg thickness"), "width": _p(40.0, "extrusion width (y)"),
-        "fillet_radius": _p(8.0, "inner corner fillet radius (0 = sharp)", non_negative)}),
-    "cracked_plate": (cracked_plate, {
-        "length": _p(200.0, "plate length (x)"), "width": _p(100.0, "plate width (y)"),
-        "thickness": _p(20.0, "plate thickness (z)"),
-        "crack": Field(STRING, default="semi-elliptical", choices=("straight", "semi-elliptical"),
-                       doc="crack front shape"),
-        "crack_length": _p(20.0, "crack length (straight) or half-length (semi-elliptical)"),
-        "crack_depth": _p(10.0, "depth of the semi-elliptical crack into the thickness")}),
-    "hollow_sphere_octant": (hollow_sphere_octant, {
-        "inner_radius": _p(50.0, "inner radius"), "outer_radius": _p(100.0, "outer radius")}),
+    "plate": (
+        plate,
+        {
+            "length": _p(200.0, "plate length (x)"),
+            "width": _p(200.0, "plate width (y)"),
+            "thickness": _p(20.0, "plate thickness (z)"),
+        },
+    ),
+    "plate_with_hole": (
+        plate_with_hole,
+        {
+            "length": _p(200.0, "plate length (x)"),
+            "width": _p(100.0, "plate width (y)"),
+            "thickness": _p(10.0, "plate thickness (z)"),
+            "hole_radius": _p(10.0, "hole radius"),
+            "hole_x": _p(0.0, "hole centre x", finite),
+            "hole_y": _p(0.0, "hole centre y", finite),
+        },
+    ),
+    "plate_cylinder_junction": (
+        plate_cylinder_junction,
+        {
+            "length": _p(200.0, "plate length (x)"),
+            "width": _p(200.0, "plate width (y)"),
+            "thickness": _p(20.0, "plate thickness (z)"),
+            "radius": _p(25.0, "cylinder radius"),
+            "height": _p(100.0, "cylinder height above the plate"),
+            "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", finite),
+        },
+    ),
+    "l_bracket": (
+        l_bracket,
+        {
+            "leg_length": _p(80.0, "base leg length (x)"),
+            "leg_height": _p(80.0, "upright leg height (z)"),
+            "thickness": _p(15.0, "leg thickness"),
+            "width": _p(40.0, "extrusion width (y)"),
+            "fillet_radius": _p(8.0, "inner corner fillet radius (0 = sharp)", non_negative),
+        },
+    ),
+    "cracked_plate": (
+        cracked_plate,
+        {
+            "length": _p(200.0, "plate length (x)"),
+            "width": _p(100.0, "plate width (y)"),
+            "thickness": _p(20.0, "plate thickness (z)"),
+            "crack": Field(
+                STRING, default="semi-elliptical", choices=("straight", "semi-elliptical"), doc="crack front shape"
+            ),
+            "crack_length": _p(20.0, "crack length (straight) or half-length (semi-elliptical)"),
+            "crack_depth": _p(10.0, "depth of the semi-elliptical crack into the thickness"),
+        },
+    ),
+    "hollow_sphere_octant": (
+        hollow_sphere_octant,
+        {"inner_radius": _p(50.0, "inner radius"), "outer_radius": _p(100.0, "outer radius")},
+    ),
 }
 
 

@@ -10,6 +10,7 @@ background grid graded exactly in the L1 metric at rate (g - 1)/sqrt(3) (so
 its trilinear interpolant is Euclidean-Lipschitz with rate g - 1) and
 h = min(raw, graded grid). Every evaluation can return its audit arrays.
 """
+
 from __future__ import annotations
 
 import logging
@@ -17,28 +18,28 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
-from ._numba import numba
 import numpy as np
 import trimesh
 from scipy import ndimage
 
+from ._numba import numba
 from .anchors import DomainDistance, SampledDistance, curve_distance, patch_distance
-from .regions import RegionDistance
+from .curvature import curvature
 from .errors import KnowledgeError, LimitError
 from .fuzzy import Term
 from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values
-from .curvature import curvature
+from .regions import RegionDistance
 from .thickness import local_size
 
 log = logging.getLogger(__name__)
 
-GRID_NODES = 400_000      # background grid for the gradation
-SAMPLES_PER_NEAR = 3      # anchor samples per finest size of the pattern
-TETS_PER_NODE = 5.5       # tetrahedra per node of a well-spaced Delaunay mesh
-NODES_PER_H3 = 1.43       # nodes per h^3 of volume of a mesh whose mean edge is h (fitted, see estimate_counts)
-NODES_PER_H2 = 0.32       # extra nodes per h^2 of surface (fitted, see estimate_counts)
-NODES_PER_H = 1.15        # nodes per h along a feature curve: 1 / the bubble diameter (0.87 h), see estimate_counts
-GRADED_THRESHOLD = 0.01   # an element counts as graded when the gradation limit lowered its h by more than this share
+GRID_NODES = 400_000  # background grid for the gradation
+SAMPLES_PER_NEAR = 3  # anchor samples per finest size of the pattern
+TETS_PER_NODE = 5.5  # tetrahedra per node of a well-spaced Delaunay mesh
+NODES_PER_H3 = 1.43  # nodes per h^3 of volume of a mesh whose mean edge is h (fitted, see estimate_counts)
+NODES_PER_H2 = 0.32  # extra nodes per h^2 of surface (fitted, see estimate_counts)
+NODES_PER_H = 1.15  # nodes per h along a feature curve: 1 / the bubble diameter (0.87 h), see estimate_counts
+GRADED_THRESHOLD = 0.01  # an element counts as graded when the gradation limit lowered its h by more than this share
 
 
 @dataclass
@@ -52,7 +53,7 @@ class BoundZone:
     exponent: float
     trapezoid: tuple | None
     height: float
-    role: str | None          # ligament role, or None for the anchor distance
+    role: str | None  # ligament role, or None for the anchor distance
     gap: float = 0.0
 
     @property
@@ -68,7 +69,7 @@ class BoundZone:
             return self.near + (self.far - self.near) * t
         if self.zone.law == "geometric":
             return self.near * (self.far / self.near) ** t
-        return self.near + (self.far - self.near) * t ** self.exponent
+        return self.near + (self.far - self.near) * t**self.exponent
 
     def membership(self, d: np.ndarray) -> np.ndarray:
         if self.trapezoid is None:
@@ -87,12 +88,12 @@ class PlacedPattern:
     pattern: str
     placement: Placement
     feature: str | None
-    length: float | None       # L
+    length: float | None  # L
     parameters: dict
     zones: list[BoundZone]
     distance: object
-    roles: dict = field(default_factory=dict)   # role -> distance to the role feature(s)
-    ties: bool = False     # dominance 'tie': where it reaches, its mu is the highest of the other patterns
+    roles: dict = field(default_factory=dict)  # role -> distance to the role feature(s)
+    ties: bool = False  # dominance 'tie': where it reaches, its mu is the highest of the other patterns
 
     @property
     def reach(self) -> float:
@@ -108,7 +109,7 @@ class PlacedPattern:
             # only points the zone can reach; the ligament d_anchor + d_role - gap is >= d_anchor - gap
             idx = np.flatnonzero(d_anchor < zone.reach + zone.gap) if np.isfinite(zone.reach) else np.arange(n)
             d = d_anchor[idx]
-            if zone.role is not None:   # >= 0 exactly; clamp the sampling error of the gap
+            if zone.role is not None:  # >= 0 exactly; clamp the sampling error of the gap
                 d = np.maximum(d + self.roles[zone.role](points[idx], zone.reach + zone.gap) - zone.gap, 0.0)
             mu = zone.membership(d)
             h = np.where(mu > 0, zone.size(d), np.inf)
@@ -131,8 +132,9 @@ class PlacedPattern:
             if zone.role is None:
                 d, spread = d_anchor, radius
             else:
-                d = np.maximum(d_anchor + self.roles[zone.role](centres, zone.reach + zone.gap + 2 * radius)
-                               - zone.gap, 0.0)
+                d = np.maximum(
+                    d_anchor + self.roles[zone.role](centres, zone.reach + zone.gap + 2 * radius) - zone.gap, 0.0
+                )
                 spread = 2 * radius
             lo, hi = np.maximum(d - spread, 0.0), d + spread
             ends_lo, ends_hi = _membership_at(zone, lo), _membership_at(zone, hi)
@@ -146,34 +148,41 @@ class PlacedPattern:
             reached = high > 0
             size_low = np.full(n, np.inf)
             finite = reached & np.isfinite(lo)
-            size_low[finite] = np.minimum(zone.size(np.minimum(lo[finite], 1e300)),
-                                          zone.size(np.minimum(hi[finite], 1e300)))
+            size_low[finite] = np.minimum(
+                zone.size(np.minimum(lo[finite], 1e300)), zone.size(np.minimum(hi[finite], 1e300))
+            )
             size_low[reached & ~np.isfinite(lo)] = min(zone.near, zone.far)
             mu_low = np.maximum(mu_low, low)
             mu_high = np.maximum(mu_high, high)
             h_low = np.minimum(h_low, size_low)
-        if self.ties:   # its mu follows the others': it can win wherever it reaches, and outranks none
+        if self.ties:  # its mu follows the others': it can win wherever it reaches, and outranks none
             mu_low, mu_high = np.zeros(n), np.where(mu_high > 0, 1.0, 0.0)
         return mu_low, mu_high, h_low
 
     def legend(self) -> dict:
-        return {"id": self.id, "pattern": self.pattern, "placement": self.placement.source,
-                "origin": self.placement.origin, "feature": self.feature, "L": self.length,
-                "parameters": self.parameters,
-                "zones": [{"id": z.zone.id, "source": z.zone.source} for z in self.zones]}
+        return {
+            "id": self.id,
+            "pattern": self.pattern,
+            "placement": self.placement.source,
+            "origin": self.placement.origin,
+            "feature": self.feature,
+            "L": self.length,
+            "parameters": self.parameters,
+            "zones": [{"id": z.zone.id, "source": z.zone.source} for z in self.zones],
+        }
 
 
 @dataclass
 class SizingAudit:
     """Why each point got its size."""
 
-    h: np.ndarray             # final size
-    raw: np.ndarray           # size of the winning pattern, before gradation and bounds
-    winner: np.ndarray        # index of the winning placed pattern
-    runner_up: np.ndarray     # index of the best other pattern (-1 if none reaches)
-    zone: np.ndarray          # zone index of the winner
-    mu: np.ndarray            # (n, patterns) membership of every placed pattern
-    sizes: np.ndarray         # (n, patterns) size every placed pattern asks for (inf where mu = 0)
+    h: np.ndarray  # final size
+    raw: np.ndarray  # size of the winning pattern, before gradation and bounds
+    winner: np.ndarray  # index of the winning placed pattern
+    runner_up: np.ndarray  # index of the best other pattern (-1 if none reaches)
+    zone: np.ndarray  # zone index of the winner
+    mu: np.ndarray  # (n, patterns) membership of every placed pattern
+    sizes: np.ndarray  # (n, patterns) size every placed pattern asks for (inf where mu = 0)
 
     @property
     def graded(self) -> np.ndarray:
@@ -186,8 +195,16 @@ class SizingAudit:
 class SizingField:
     """h(x) from placed patterns by membership dominance, with the gradation limit and bounds."""
 
-    def __init__(self, placed: list[PlacedPattern], geometry, gradation: float, global_size: float,
-                 min_size: float | None = None, max_size: float | None = None, features=None):
+    def __init__(
+        self,
+        placed: list[PlacedPattern],
+        geometry,
+        gradation: float,
+        global_size: float,
+        min_size: float | None = None,
+        max_size: float | None = None,
+        features=None,
+    ):
         if not placed:
             raise KnowledgeError("no pattern is placed", fix="place the base pattern 'uniform-domain'")
         self.placed = placed
@@ -232,7 +249,7 @@ class SizingField:
         origin = lo - cell
         cells_shape = tuple(n - 1 for n in shape)
         half_diagonal = 0.5 * math.sqrt(3.0) * cell
-        bounded = []   # (cells, mu low, mu high, h low) per placed pattern
+        bounded = []  # (cells, mu low, mu high, h low) per placed pattern
         for placed in self.placed:
             index = _cells_near(placed.distance, placed.reach + 2 * half_diagonal, origin, cell, cells_shape)
             centres = origin + cell * (np.column_stack(np.unravel_index(index, cells_shape)) + 0.5)
@@ -249,8 +266,12 @@ class SizingField:
         padded = np.pad(cells, 1, mode="edge")
         nodes = np.full(shape, np.inf)
         for corner in np.ndindex(2, 2, 2):
-            nodes = np.minimum(nodes, padded[corner[0]:corner[0] + shape[0], corner[1]:corner[1] + shape[1],
-                                             corner[2]:corner[2] + shape[2]])
+            nodes = np.minimum(
+                nodes,
+                padded[
+                    corner[0] : corner[0] + shape[0], corner[1] : corner[1] + shape[1], corner[2] : corner[2] + shape[2]
+                ],
+            )
         rate = (self.gradation - 1.0) / math.sqrt(3.0)
         grid = nodes
         for axis in range(3):
@@ -325,8 +346,9 @@ def _dominance(mu, size):
     for i in numba.prange(n):
         best = -1
         for k in range(count):
-            if mu[k, i] > 0 and (best < 0 or mu[k, i] > mu[best, i]
-                                 or (mu[k, i] == mu[best, i] and size[k, i] < size[best, i])):
+            if mu[k, i] > 0 and (
+                best < 0 or mu[k, i] > mu[best, i] or (mu[k, i] == mu[best, i] and size[k, i] < size[best, i])
+            ):
                 best = k
         second = -1
         for k in range(count):
@@ -348,6 +370,7 @@ def _grade_along(grid: np.ndarray, axis: int, step: float) -> np.ndarray:
 
 # ------------------------------------------------------------------------------- binding
 
+
 def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, global_size: float) -> list[PlacedPattern]:
     """Place each placement's pattern on its anchors; evaluate its parameters."""
     placed = []
@@ -356,12 +379,25 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
         anchors = _anchors(pattern, placement, features, geometry)
         local = pattern.anchor in LOCAL_SCALES
         if not anchors and not local:
-            log.info("note: %s places '%s' on %s, but the solid has none; not placed (%s)", placement.origin,
-                     pattern.name, placement.every or placement.at, placement.source)
+            log.info(
+                "note: %s places '%s' on %s, but the solid has none; not placed (%s)",
+                placement.origin,
+                pattern.name,
+                placement.every or placement.at,
+                placement.source,
+            )
         for feature, make_distance in anchors:
-            one = _bind_one(pattern, placement, feature, make_distance, features, geometry, global_size,
-                            multiple=len(anchors) > 1 or local)
-            if one.zones or not local:   # a class of walls (gaps) whose zones are all off sizes nothing
+            one = _bind_one(
+                pattern,
+                placement,
+                feature,
+                make_distance,
+                features,
+                geometry,
+                global_size,
+                multiple=len(anchors) > 1 or local,
+            )
+            if one.zones or not local:  # a class of walls (gaps) whose zones are all off sizes nothing
                 placed.append(one)
     return placed
 
@@ -374,8 +410,11 @@ def _anchors(pattern, placement, features, geometry):
         region = RegionDistance(placement.region, placement.source)
         return [(None, lambda spacing: region)]
     if pattern.anchor in LOCAL_SCALES:
-        parts = curvature(geometry, features.feature_angle).parts() if pattern.anchor == "curvature" \
+        parts = (
+            curvature(geometry, features.feature_angle).parts()
+            if pattern.anchor == "curvature"
             else local_size(geometry).parts(pattern.anchor)
+        )
         return [(part, part.distance) for part in parts]
     if pattern.anchor == "point":
         if placement.point is not None:
@@ -403,14 +442,20 @@ def _union(distances: list):
         return distances[0]
     first = distances[0]
     offsets = np.cumsum([0] + [len(d.vertices) for d in distances[:-1]])
-    return type(first)(np.concatenate([d.vertices for d in distances]),
-                       np.concatenate([d.simplices + o for d, o in zip(distances, offsets)]), first.spacing)
+    return type(first)(
+        np.concatenate([d.vertices for d in distances]),
+        np.concatenate([d.simplices + o for d, o in zip(distances, offsets)]),
+        first.spacing,
+    )
 
 
 def _no_feature(placement, features):
     names = ", ".join(features.names) or "none"
-    return KnowledgeError(f"no feature named '{placement.at}' of the kind the pattern needs", where=placement.source,
-                          fix=f"named features of this solid: {names}")
+    return KnowledgeError(
+        f"no feature named '{placement.at}' of the kind the pattern needs",
+        where=placement.source,
+        fix=f"named features of this solid: {names}",
+    )
 
 
 def _length(pattern, placement, feature, features):
@@ -429,9 +474,12 @@ def _length(pattern, placement, feature, features):
             return float(cylinder.radius)
     if pattern.scale in features.lengths:
         return float(features.lengths[pattern.scale])
-    raise KnowledgeError(f"pattern '{pattern.name}' needs the length '{pattern.scale}' (L) of "
-                         f"{feature.id if feature is not None else 'its anchor'}, which is not known",
-                         where=placement.source, fix="give 'scale: LENGTH' in the placement")
+    raise KnowledgeError(
+        f"pattern '{pattern.name}' needs the length '{pattern.scale}' (L) of "
+        f"{feature.id if feature is not None else 'its anchor'}, which is not known",
+        where=placement.source,
+        fix="give 'scale: LENGTH' in the placement",
+    )
 
 
 def _bind_one(pattern, placement, feature, make_distance, features, geometry, global_size, multiple):
@@ -450,17 +498,26 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
     roles = {}
     for role, (default, _) in pattern.roles.items():
         name = placement.roles.get(role, default)
-        targets = [f for f in features.patches if name in f.names] or \
-            [f for f in features.curves if name in f.names]
+        targets = [f for f in features.patches if name in f.names] or [f for f in features.curves if name in f.names]
         if targets:
-            roles[role] = _union([patch_distance(geometry, f, spacing) if hasattr(f, "faces")
-                                  else curve_distance(f, spacing) for f in targets])
+            roles[role] = _union(
+                [
+                    patch_distance(geometry, f, spacing) if hasattr(f, "faces") else curve_distance(f, spacing)
+                    for f in targets
+                ]
+            )
             anchor_samples = getattr(distance, "samples", None)
             env[f"gap_{role}"] = roles[role].gap_to(distance) if anchor_samples is not None else 0.0
         else:
             env[f"gap_{role}"] = math.inf
-            log.info("note: %s: role '%s' of pattern '%s' names '%s', which this solid does not have; "
-                     "the zones that use it are off", where, role, pattern.name, name)
+            log.info(
+                "note: %s: role '%s' of pattern '%s' names '%s', which this solid does not have; "
+                "the zones that use it are off",
+                where,
+                role,
+                pattern.name,
+                name,
+            )
     zones = []
     for zone in pattern.zones:
         role = zone.distance.split(":", 1)[1] if zone.distance.startswith("ligament:") else None
@@ -471,11 +528,22 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
             gap = env.get(f"gap_{role}", 0.0) if role else 0.0
             zones.append(BoundZone(zone, **numbers, role=role, gap=gap))
     suffix = f"@{feature.id}" if feature is not None and (multiple or placement.every) else ""
-    return PlacedPattern(placement.id + suffix, pattern.name, placement, getattr(feature, "id", None), L, params,
-                         zones, distance, roles, ties=pattern.dominance == "tie")
+    return PlacedPattern(
+        placement.id + suffix,
+        pattern.name,
+        placement,
+        getattr(feature, "id", None),
+        L,
+        params,
+        zones,
+        distance,
+        roles,
+        ties=pattern.dominance == "tie",
+    )
 
 
 # ------------------------------------------------------------------------- count estimate
+
 
 def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, seed: int = 0) -> tuple[float, float]:
     """Expected (nodes, tetrahedra) of a mesh of the sizing field: h is the mean edge length (docs/rules.md
@@ -496,10 +564,11 @@ def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, see
     rng = np.random.default_rng(seed)
     points = stratified_points(*geometry.bounds, samples, rng)
     inside = geometry.contains(points)
-    volume_density = float(np.mean(sizing(points[inside]) ** -3.0)) if inside.any() else sizing.h_min ** -3.0
+    volume_density = float(np.mean(sizing(points[inside]) ** -3.0)) if inside.any() else sizing.h_min**-3.0
     on_surface, _ = trimesh.sample.sample_surface(geometry.mesh, samples // 4, seed=seed)
-    nodes = NODES_PER_H3 * geometry.volume * volume_density \
-        + NODES_PER_H2 * geometry.area * float(np.mean(sizing(on_surface) ** -2.0))
+    nodes = NODES_PER_H3 * geometry.volume * volume_density + NODES_PER_H2 * geometry.area * float(
+        np.mean(sizing(on_surface) ** -2.0)
+    )
     if features is not None:
         for curve in features.curves:
             if curve.on_surface:
@@ -525,5 +594,6 @@ def check_element_limit(sizing, max_elements: float) -> float:
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {max_elements:.3g}); "
             f"the smallest size is {sizing.h_min:.4g}",
-            fix="use larger sizes, or raise the limit with --max-elements")
+            fix="use larger sizes, or raise the limit with --max-elements",
+        )
     return tets

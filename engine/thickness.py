@@ -19,6 +19,7 @@ a class yet: each class is one anchor of a ``thin-wall`` (``narrow-gap``) patter
 pattern has one L and its sizes and bounds stay exact (see :mod:`engine.sizing`). :func:`classes` does this
 for any measure over surface pieces (the radius of curvature too, :mod:`engine.curvature`).
 """
+
 from __future__ import annotations
 
 import time
@@ -29,13 +30,13 @@ import numpy as np
 
 from .anchors import FeatureDistance
 
-OPPOSITE_WITHIN = 15.0      # degrees between the face hit and the reversed start normal
-RAY_OFFSET = 1e-7           # ray origins off the surface, times the model size
-CLASS_RATIO = 2 ** 0.25     # measures within this ratio are one class (and do not split a piece)
-MIN_PIECE = 1e-3            # pieces are not split below this length, times the model size
-START_AREA = 1 / 16 ** 2    # facets are first split down to this area, times the model size squared
-MAX_LEVELS = 16             # splits of one facet at most
-MEASURES = {"thin-wall": "thickness", "narrow-gap": "gap"}   # anchor kind -> what it measures
+OPPOSITE_WITHIN = 15.0  # degrees between the face hit and the reversed start normal
+RAY_OFFSET = 1e-7  # ray origins off the surface, times the model size
+CLASS_RATIO = 2**0.25  # measures within this ratio are one class (and do not split a piece)
+MIN_PIECE = 1e-3  # pieces are not split below this length, times the model size
+START_AREA = 1 / 16**2  # facets are first split down to this area, times the model size squared
+MAX_LEVELS = 16  # splits of one facet at most
+MEASURES = {"thin-wall": "thickness", "narrow-gap": "gap"}  # anchor kind -> what it measures
 
 
 @dataclass
@@ -43,9 +44,9 @@ class LocalPart:
     """The surface pieces of one class of a measure: one anchor of a thin-wall, narrow-gap or curvature
     pattern."""
 
-    id: str                   # e.g. "wall-0.297": L in [0.297, 0.297 q), its pieces measuring [L, q L)
-    length: float             # L: the smallest measure of its pieces
-    triangles: np.ndarray     # (m, 3, 3)
+    id: str  # e.g. "wall-0.297": L in [0.297, 0.297 q), its pieces measuring [L, q L)
+    length: float  # L: the smallest measure of its pieces
+    triangles: np.ndarray  # (m, 3, 3)
 
     def distance(self, spacing: float) -> FeatureDistance:
         """Exact distance to the pieces (gaps to them measured on edge samples ``spacing`` apart)."""
@@ -57,9 +58,9 @@ class LocalPart:
 class LocalSize:
     """Thickness and gap width of the surface, per piece (inf where not measured)."""
 
-    triangles: np.ndarray     # (m, 3, 3) the pieces, covering the surface
-    thickness: np.ndarray     # (m,)
-    gap: np.ndarray           # (m,)
+    triangles: np.ndarray  # (m, 3, 3) the pieces, covering the surface
+    thickness: np.ndarray  # (m,)
+    gap: np.ndarray  # (m,)
     rays: int
     seconds: float
 
@@ -79,8 +80,9 @@ def classes(triangles: np.ndarray, measure: np.ndarray, prefix: str) -> list[Loc
     while start < len(order):
         end = int(np.searchsorted(values, values[start] * CLASS_RATIO))
         level = np.floor(np.log(values[start]) / np.log(CLASS_RATIO))
-        parts.append(LocalPart(f"{prefix}-{CLASS_RATIO ** level:.3g}", float(values[start]),
-                               triangles[np.sort(order[start:end])]))
+        parts.append(
+            LocalPart(f"{prefix}-{CLASS_RATIO**level:.3g}", float(values[start]), triangles[np.sort(order[start:end])])
+        )
         start = end
     return parts
 
@@ -103,11 +105,11 @@ def measure(vertices: np.ndarray, faces: np.ndarray) -> LocalSize:
     normals = _normals(V[F])
     scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     caster = _Caster(tree, V, F, normals, RAY_OFFSET * scale)
-    pieces, owner = _split_to_area(V[F], START_AREA * scale ** 2)
+    pieces, owner = _split_to_area(V[F], START_AREA * scale**2)
     done_tri, done_thick, done_gap = [], [], []
     rays = 0
     for level in range(MAX_LEVELS + 1):
-        children = _split(pieces)                                    # (m, 4, 3, 3)
+        children = _split(pieces)  # (m, 4, 3, 3)
         points = children.mean(axis=2).reshape(-1, 3)
         n = np.repeat(normals[owner], 4, axis=0)
         thick = caster.cast(points, n, -1.0).reshape(-1, 4)
@@ -125,8 +127,13 @@ def measure(vertices: np.ndarray, faces: np.ndarray) -> LocalSize:
             break
         pieces = children[split].reshape(-1, 3, 3)
         owner = np.repeat(owner[split], 4)
-    return LocalSize(np.concatenate(done_tri), np.concatenate(done_thick), np.concatenate(done_gap), rays,
-                     time.perf_counter() - start)
+    return LocalSize(
+        np.concatenate(done_tri),
+        np.concatenate(done_thick),
+        np.concatenate(done_gap),
+        rays,
+        time.perf_counter() - start,
+    )
 
 
 class _Caster:
@@ -158,8 +165,10 @@ def _split_to_area(triangles: np.ndarray, area: float):
     owner = np.arange(len(triangles))
     done, done_owner = [], []
     while len(triangles):
-        large = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]),
-                               axis=1) > 2 * area
+        large = (
+            np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
+            > 2 * area
+        )
         done.append(triangles[~large])
         done_owner.append(owner[~large])
         triangles, owner = _split(triangles[large]).reshape(-1, 3, 3), np.repeat(owner[large], 4)

@@ -1,5 +1,6 @@
 """Mesh topology shared by the meshers, the output and the FE model: which tets hold a node, which tet holds
 a face. Numba kernels over (m, 4) int64 tets, no geometry."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -32,7 +33,7 @@ def _node_stars(tets, n):
 def find_face(tets, start, star, a, b, c, skip):
     """The tet other than ``skip`` with nodes a, b, c, and the local index of its fourth node; -1 if none."""
     lo = min(a, min(b, c))
-    for s in star[start[lo]:start[lo + 1]]:
+    for s in star[start[lo] : start[lo + 1]]:
         if s == skip:
             continue
         found, other = 0, -1

@@ -4,6 +4,7 @@
 mapping is a :class:`Located` dict that knows the file and the line/column of
 itself and of each of its keys. Errors can then name ``file:line:col``.
 """
+
 from __future__ import annotations
 
 import math
@@ -58,7 +59,8 @@ def _loader_for(source: str, error=FuzzymeshError):
     # YAML 1.2 booleans: only true/false (PyYAML also reads yes/no/on/off, which breaks labels like ON)
     LocatingLoader.yaml_implicit_resolvers = {
         k: [(tag, regexp) for tag, regexp in v if tag != "tag:yaml.org,2002:bool"]
-        for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+        for k, v in yaml.SafeLoader.yaml_implicit_resolvers.items()
+    }
     LocatingLoader.add_implicit_resolver("tag:yaml.org,2002:float", FLOAT_1_2, list("-+0123456789."))
     LocatingLoader.add_implicit_resolver("tag:yaml.org,2002:bool", BOOL_1_2, list("tTfF"))
 
@@ -88,10 +90,12 @@ def _loader_for(source: str, error=FuzzymeshError):
 
     def construct_float(loader, node):
         value = loader.construct_yaml_float(node)
-        if math.isinf(value) and not node.value.lstrip("+-").lower().startswith("."):   # 1e400, not .inf
-            raise error(f"the number {node.value} is out of range (its magnitude is beyond 1.8e308: infinite)",
-                        where=f"{source}:{node.start_mark.line + 1}:{node.start_mark.column + 1}",
-                        fix="give a number of magnitude below 1.8e308")
+        if math.isinf(value) and not node.value.lstrip("+-").lower().startswith("."):  # 1e400, not .inf
+            raise error(
+                f"the number {node.value} is out of range (its magnitude is beyond 1.8e308: infinite)",
+                where=f"{source}:{node.start_mark.line + 1}:{node.start_mark.column + 1}",
+                fix="give a number of magnitude below 1.8e308",
+            )
         return value
 
     LocatingLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, construct_mapping)
@@ -106,8 +110,9 @@ def parse_yaml(text: str, source: str, error=FuzzymeshError):
     except yaml.constructor.ConstructorError as exc:
         mark = exc.problem_mark
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
-        raise error(f"unsupported YAML tag: {exc.problem}", where=where,
-                    fix="remove the tag; only plain YAML values are read") from None
+        raise error(
+            f"unsupported YAML tag: {exc.problem}", where=where, fix="remove the tag; only plain YAML values are read"
+        ) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"{source}:{mark.line + 1}:{mark.column + 1}" if mark else source
@@ -126,8 +131,9 @@ def load_yaml(path: str | Path, error=FuzzymeshError):
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"cannot read the file ({exc.__class__.__name__})", where=source,
-                    fix="give a readable UTF-8 YAML file") from None
+        raise error(
+            f"cannot read the file ({exc.__class__.__name__})", where=source, fix="give a readable UTF-8 YAML file"
+        ) from None
     data = parse_yaml(text, source, error)
     if data is None:
         raise error("the file is empty", where=f"{source}:1:1", fix="write the YAML content")

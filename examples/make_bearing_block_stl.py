@@ -8,6 +8,7 @@ manifold3d (exact booleans, closed and outward-oriented) and written as binary S
 segments: the chordal error is 0.12 % of the radius, so the feature recognition sees the bore and the
 bolt holes as holes and the concave circle where the boss meets the plate as a re-entrant edge.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -34,5 +35,7 @@ if __name__ == "__main__":
     path = Path(__file__).with_name("bearing-block.stl")
     surface = bearing_block()
     surface.export(path)
-    print(f"wrote {path}: {len(surface.faces)} triangles, volume {surface.volume:.6g}, "
-          f"watertight {surface.is_watertight}, {path.stat().st_size / 1024:.0f} KB")
+    print(
+        f"wrote {path}: {len(surface.faces)} triangles, volume {surface.volume:.6g}, "
+        f"watertight {surface.is_watertight}, {path.stat().st_size / 1024:.0f} KB"
+    )

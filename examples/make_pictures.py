@@ -11,6 +11,7 @@ z = 10 (mid-plate), and those PNGs, taken from the report page and re-encoded wi
 palette (about 100 KB instead of 330 KB, so they can be committed), are written as
 ``docs/images/NAME-cut-y0.png`` and ``NAME-cut-z10.png``. About 45,000-55,000 tetrahedra per case.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,9 @@ def report_pictures(html: str) -> dict[str, bytes]:
 def palette_png(png: bytes) -> bytes:
     """The picture with 256 colours, no dithering: the plots' flat colours survive, the file shrinks 3x."""
     buffer = io.BytesIO()
-    Image.open(io.BytesIO(png)).convert("RGB").quantize(256, method=Image.Quantize.MEDIANCUT,
-                                                        dither=Image.Dither.NONE).save(buffer, "PNG", optimize=True)
+    Image.open(io.BytesIO(png)).convert("RGB").quantize(
+        256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE
+    ).save(buffer, "PNG", optimize=True)
     return buffer.getvalue()
 
 

@@ -1,4 +1,5 @@
 """Shared fixtures: built shapes are cached per session (they are immutable in use)."""
+
 from __future__ import annotations
 
 import functools
@@ -34,6 +35,14 @@ def junction_run(tmp_path_factory):
 
     folder = tmp_path_factory.mktemp("junction")
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge",
-                                   "size": 12.0, "output": {"formats": ["vtu"]}}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"shape": "plate_cylinder_junction"},
+                "recipe": "junction-edge",
+                "size": 12.0,
+                "output": {"formats": ["vtu"]},
+            }
+        )
+    )
     return folder / "out", run(load_job(job))

@@ -1,6 +1,7 @@
 """The acceptance gate (engine/acceptance.py, issue 16): no broken mesh leaves with exit 0, whichever packer or
 mesher made it; a rejected mesh writes no files, prints one line naming the check, the place and the fix, and
 exits with code 4; --keep-invalid writes it as <name>.invalid.*; the tolerances come from the knowledge base."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -12,7 +13,7 @@ import pytest
 from engine.acceptance import Tolerances, boundary_topology
 from engine.cli import main
 from engine.errors import MeshRejected
-from engine.job import job_from_dict, load_job
+from engine.job import load_job
 from engine.knowledge import load_knowledge
 from engine.packing import VOLUME, get_packer, register_packer
 from engine.pipeline import run
@@ -89,8 +90,14 @@ def test_a_plug_in_packer_is_gated_like_the_built_in_ones(tmp_path):
     def all_volume(geometry, features, sizing, *, seed, knowledge=None):
         packing = bubble(geometry, features, sizing, seed=seed, knowledge=knowledge)
         keep = np.arange(len(packing)) % 3 != 0
-        return dataclasses.replace(packing, points=packing.points[keep], level=np.full(keep.sum(), VOLUME, np.int8),
-                                   entity=np.full(keep.sum(), -1), radius=packing.radius[keep], ids=None)
+        return dataclasses.replace(
+            packing,
+            points=packing.points[keep],
+            level=np.full(keep.sum(), VOLUME, np.int8),
+            entity=np.full(keep.sum(), -1),
+            radius=packing.radius[keep],
+            ids=None,
+        )
 
     job = dataclasses.replace(load_job(_job(tmp_path, BRACKET)), packer="test-all-volume")
     with pytest.raises(MeshRejected):
@@ -101,9 +108,14 @@ def test_a_plug_in_packer_is_gated_like_the_built_in_ones(tmp_path):
 RELAXED = {"min_dihedral": 0.0, "volume": 0.5, "hausdorff": 50.0}
 
 
-@pytest.mark.parametrize("setting, check", [({"min_dihedral": 45.0}, "minimum dihedral angle"),
-                                            ({"volume": 1e-7}, "volume"),
-                                            ({"hausdorff": 1e-4}, "Hausdorff distance")])
+@pytest.mark.parametrize(
+    "setting, check",
+    [
+        ({"min_dihedral": 45.0}, "minimum dihedral angle"),
+        ({"volume": 1e-7}, "volume"),
+        ({"hausdorff": 1e-4}, "Hausdorff distance"),
+    ],
+)
 def test_the_tolerances_are_knowledge(capsys, tmp_path, setting, check):
     """The job's own sizing defaults replace the shipped ones (no curvature pattern here): relaxed
     everywhere but in the one tolerance under test."""
@@ -121,11 +133,15 @@ def test_the_tolerances_are_knowledge(capsys, tmp_path, setting, check):
 
 
 def test_a_tolerance_of_the_wrong_type_is_one_line(capsys, tmp_path):
-    job = _job(tmp_path, SMALL, """\
+    job = _job(
+        tmp_path,
+        SMALL,
+        """\
         kind: sizing
         acceptance:
           min_dihedral: sharp
-        """)
+        """,
+    )
     assert main(["mesh", str(job)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "sizing.yaml:3:" in err and "min_dihedral" in err
@@ -156,8 +172,15 @@ def test_a_10_node_element_below_the_floor_is_refused(tmp_path):
     result = run(job, write=False)
     elements = tet_quality(result.mesh.points, result.mesh.tets)
     tolerances = load_knowledge().sizing["acceptance"]
-    check_mesh(result.mesh, result.geometry, result.features, elements, result.boundary, tolerances,
-               np.full(len(result.mesh.tets), tolerances.quadratic_jacobian))
+    check_mesh(
+        result.mesh,
+        result.geometry,
+        result.features,
+        elements,
+        result.boundary,
+        tolerances,
+        np.full(len(result.mesh.tets), tolerances.quadratic_jacobian),
+    )
     jacobians = np.ones(len(result.mesh.tets))
     jacobians[7] = 0.5 * tolerances.quadratic_jacobian
     with pytest.raises(MeshRejected, match="10-node element validity"):

@@ -1,5 +1,6 @@
 """The package's shape (issue 19): engine/ has no import cycles, counting the imports inside functions that
 would otherwise hide one (not those under ``if TYPE_CHECKING:``, which never run)."""
+
 from __future__ import annotations
 
 import ast
@@ -94,6 +95,7 @@ def test_lint_needs_no_geometry_library():
 
     heavy = ("igl", "trimesh", "gmsh", "pymeshlab", "manifold3d", "meshio")
     probe = f"import sys, engine.knowledge; print([m for m in {heavy!r} if m in sys.modules])"
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
-                         cwd=ENGINE.parent).stdout.strip()
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=ENGINE.parent
+    ).stdout.strip()
     assert out == "[]"

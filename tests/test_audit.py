@@ -1,4 +1,5 @@
 """The audit: every element's size traced to the pattern, zone, placement and rule behind it."""
+
 from __future__ import annotations
 
 import html
@@ -94,19 +95,33 @@ def test_a_placed_pattern_that_wins_no_element_is_a_warning_in_the_log_and_the_r
     from engine.pipeline import run
 
     job = tmp_path / "job.yaml"
-    job.write_text(yaml.safe_dump({
-        "geometry": {"shape": "cylinder"}, "size": 12.0, "output": {"formats": ["vtu"]},
-        "place": [{"pattern": "uniform-domain", "id": "coarse", "parameters": {"size": 1.2}},   # ties, larger h
-                  {"pattern": "uniform-domain", "id": "base"},
-                  {"pattern": "uniform-region", "id": "far-away", "parameters": {"size": 3},
-                   "region": {"box": {"min": [500, 500, 500], "max": [510, 510, 510]}}}]}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"shape": "cylinder"},
+                "size": 12.0,
+                "output": {"formats": ["vtu"]},
+                "place": [
+                    {"pattern": "uniform-domain", "id": "coarse", "parameters": {"size": 1.2}},  # ties, larger h
+                    {"pattern": "uniform-domain", "id": "base"},
+                    {
+                        "pattern": "uniform-region",
+                        "id": "far-away",
+                        "parameters": {"size": 3},
+                        "region": {"box": {"min": [500, 500, 500], "max": [510, 510, 510]}},
+                    },
+                ],
+            }
+        )
+    )
     with caplog.at_level(logging.WARNING):
         result = run(load_job(job))
     won = np.bincount(result.audit.cells["winner"] + 1, minlength=len(result.sizing.placed) + 1)[1:]
     idle = {p.id for p, n in zip(result.sizing.placed, won) if n == 0}
     assert {"coarse", "far-away"} <= idle and "base" not in idle
-    logged = [m for m in (r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
-              if "wins no element" in m]
+    logged = [
+        m for m in (r.getMessage() for r in caplog.records if r.levelno == logging.WARNING) if "wins no element" in m
+    ]
     report = json.loads((tmp_path / "out" / "mesh.report.json").read_text())
     assert report["warnings"] == logged == result.warnings and len(logged) == len(idle)
     coarse = next(w for w in logged if "'coarse'" in w)

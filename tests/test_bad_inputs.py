@@ -13,6 +13,7 @@ bad input the contract is:
 
 The surface files are made here with numpy/trimesh or written by hand.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -32,8 +33,10 @@ from engine.cli import main
 
 ERROR_PREFIX = "fuzzymesh: error:"
 # lines the pipeline logs at INFO level while it works; anything else on stderr is suspect
-PROGRESS_LINE = re.compile(r"^(geometry|sizing|packing|meshing|exact surfaces|quality|boundary|size conformity|audit|acceptance|output|done)"
-                           r"( \([\w-]+\)| (curve|patch|volume))?: ")
+PROGRESS_LINE = re.compile(
+    r"^(geometry|sizing|packing|meshing|exact surfaces|quality|boundary|size conformity|audit|acceptance|output|done)"
+    r"( \([\w-]+\)| (curve|patch|volume))?: "
+)
 MESH_SUFFIXES = {".vtu", ".msh"}
 SMALL = 2.5  # element size for the cube of side 10 in the cases that must mesh
 
@@ -135,19 +138,23 @@ def write_job(tmp_path: Path, text: str, name: str = "job.yaml") -> Path:
 
 def surface_job(tmp_path: Path, surface: str) -> Path:
     """A job meshing ``surface`` (relative to the job file) into tmp_path/out."""
-    return write_job(tmp_path, f"""
+    return write_job(
+        tmp_path,
+        f"""
         geometry:
           file: {surface}
         size: {SMALL}
         output:
           directory: out
-        """)
+        """,
+    )
 
 
 def mesh_files(tmp_path: Path) -> list[Path]:
     """Mesh outputs (and leftover temporary files of the atomic writer) anywhere under tmp_path."""
-    return [p for p in tmp_path.rglob("*")
-            if p.is_file() and (p.suffix in MESH_SUFFIXES or p.name.startswith(".mesh."))]
+    return [
+        p for p in tmp_path.rglob("*") if p.is_file() and (p.suffix in MESH_SUFFIXES or p.name.startswith(".mesh."))
+    ]
 
 
 def run_cli(capture, *argv) -> tuple[int, str, str]:
@@ -181,7 +188,7 @@ def assert_refused(capsys, tmp_path: Path, job: Path, *fragments: str, where: st
         assert f"{ERROR_PREFIX} {where}: " in line, f"expected location {where!r} in: {line!r}"
     for fragment in fragments:
         assert fragment.lower() in line.lower(), f"{fragment!r} missing from: {line!r}"
-    message = line[len(ERROR_PREFIX):]
+    message = line[len(ERROR_PREFIX) :]
     assert "; " in message, f"the error says nothing about what to do: {line!r}"
     assert not mesh_files(tmp_path), f"output files left behind: {mesh_files(tmp_path)}"
     return line
@@ -207,8 +214,7 @@ def assert_meshed(capsys, tmp_path: Path, job: Path) -> str:
 
 def test_missing_surface_file(capsys, tmp_path):
     job = surface_job(tmp_path, "nowhere.stl")
-    assert_refused(capsys, tmp_path, job, "file not found", "check the path",
-                   where=str(tmp_path / "nowhere.stl"))
+    assert_refused(capsys, tmp_path, job, "file not found", "check the path", where=str(tmp_path / "nowhere.stl"))
 
 
 def test_empty_surface_file(capsys, tmp_path):
@@ -220,8 +226,7 @@ def test_empty_surface_file(capsys, tmp_path):
 def test_unknown_surface_extension(capsys, tmp_path):
     write_obj(tmp_path / "cube.xyz", *cube())
     job = surface_job(tmp_path, "cube.xyz")
-    line = assert_refused(capsys, tmp_path, job, "unknown surface format", "'.xyz'",
-                          where=str(tmp_path / "cube.xyz"))
+    line = assert_refused(capsys, tmp_path, job, "unknown surface format", "'.xyz'", where=str(tmp_path / "cube.xyz"))
     for fmt in (".stl", ".obj", ".ply", ".off"):
         assert fmt in line
 
@@ -229,20 +234,29 @@ def test_unknown_surface_extension(capsys, tmp_path):
 RANDOM_BYTES = np.random.default_rng(1).integers(0, 256, 1000, dtype=np.uint8).tobytes()
 
 
-@pytest.mark.parametrize("name, content", [
-    pytest.param("garbage.stl", b"this is not an STL file at all\njust some words\n", id="stl-text"),
-    pytest.param("garbage.stl", RANDOM_BYTES, id="stl-random-bytes"),
-    pytest.param("garbage.stl", b"solid x\n  facet normal 0 0 0\n    outer loop\n      vertex 1 2\n",
-                 id="stl-truncated-ascii"),
-    pytest.param("garbage.stl", b"\0" * 80 + (5).to_bytes(4, "little"), id="stl-binary-header-only"),
-    pytest.param("garbage.obj", bytes(range(256)) * 4, id="obj-binary"),
-    pytest.param("garbage.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", id="obj-index-out-of-range"),
-    pytest.param("garbage.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", id="obj-no-faces"),
-    pytest.param("garbage.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n",
-                 id="ply-truncated"),
-    pytest.param("garbage.off", b"OFF\n3 1 0\n0 0 0\n1 0\n", id="off-truncated"),
-    pytest.param("garbage.glb", b"glTF\x02\x00\x00\x00garbage", id="glb-garbage"),
-])
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        pytest.param("garbage.stl", b"this is not an STL file at all\njust some words\n", id="stl-text"),
+        pytest.param("garbage.stl", RANDOM_BYTES, id="stl-random-bytes"),
+        pytest.param(
+            "garbage.stl",
+            b"solid x\n  facet normal 0 0 0\n    outer loop\n      vertex 1 2\n",
+            id="stl-truncated-ascii",
+        ),
+        pytest.param("garbage.stl", b"\0" * 80 + (5).to_bytes(4, "little"), id="stl-binary-header-only"),
+        pytest.param("garbage.obj", bytes(range(256)) * 4, id="obj-binary"),
+        pytest.param("garbage.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", id="obj-index-out-of-range"),
+        pytest.param("garbage.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", id="obj-no-faces"),
+        pytest.param(
+            "garbage.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n",
+            id="ply-truncated",
+        ),
+        pytest.param("garbage.off", b"OFF\n3 1 0\n0 0 0\n1 0\n", id="off-truncated"),
+        pytest.param("garbage.glb", b"glTF\x02\x00\x00\x00garbage", id="glb-garbage"),
+    ],
+)
 def test_garbage_surface_file(capsys, tmp_path, name, content):
     (tmp_path / name).write_bytes(content)
     job = surface_job(tmp_path, name)
@@ -263,8 +277,7 @@ def test_not_watertight(capsys, tmp_path):
     assert keep.sum() == 10
     write_ascii_stl(tmp_path / "open.stl", vertices, faces[keep])
     job = surface_job(tmp_path, "open.stl")
-    assert_refused(capsys, tmp_path, job, "not closed", "watertight", "4 edges",
-                   where=str(tmp_path / "open.stl"))
+    assert_refused(capsys, tmp_path, job, "not closed", "watertight", "4 edges", where=str(tmp_path / "open.stl"))
 
 
 def test_not_manifold(capsys, tmp_path):
@@ -317,15 +330,23 @@ def test_zero_volume_flat_tetrahedron(capsys, tmp_path):
 def test_overlapping_cubes_are_refused_naming_the_bodies(capsys, tmp_path):
     write_with_trimesh(tmp_path / "overlap.stl", *two_cubes(offset=(5.0, 5.0, 5.0)))
     job = surface_job(tmp_path, "overlap.stl")
-    assert_refused(capsys, tmp_path, job, "holds 2 bodies", "bodies 1 and 2 touch or overlap", "unite",
-                   where=str(tmp_path / "overlap.stl"))
+    assert_refused(
+        capsys,
+        tmp_path,
+        job,
+        "holds 2 bodies",
+        "bodies 1 and 2 touch or overlap",
+        "unite",
+        where=str(tmp_path / "overlap.stl"),
+    )
 
 
 def test_two_disjoint_cubes_refused(capsys, tmp_path):
     write_obj(tmp_path / "two.obj", *two_cubes(offset=(20.0, 0.0, 0.0)))
     job = surface_job(tmp_path, "two.obj")
-    assert_refused(capsys, tmp_path, job, "2 disconnected solids", "allow_multiple_solids: true",
-                   where=str(tmp_path / "two.obj"))
+    assert_refused(
+        capsys, tmp_path, job, "2 disconnected solids", "allow_multiple_solids: true", where=str(tmp_path / "two.obj")
+    )
 
 
 def test_two_disjoint_cubes_allowed(capsys, tmp_path):
@@ -371,20 +392,21 @@ def test_inconsistent_winding_is_fixed(capsys, tmp_path):
 
 
 def test_missing_job_file(capsys, tmp_path):
-    assert_refused(capsys, tmp_path, tmp_path / "nojob.yaml", "file not found",
-                   where=str(tmp_path / "nojob.yaml"))
+    assert_refused(capsys, tmp_path, tmp_path / "nojob.yaml", "file not found", where=str(tmp_path / "nojob.yaml"))
 
 
-@pytest.mark.parametrize("text, location, fragment", [
-    pytest.param("geometry:\n\tshape: cylinder\n", "2:1", "'\\t'", id="tab"),
-    pytest.param("geometry:\n  shape: cylinder\nsize: [1, 2\n", "4:1", "expected ','", id="unclosed-bracket"),
-    pytest.param("geometry: shape: cylinder\n", "1:16", "mapping values are not allowed", id="nested-colon"),
-])
+@pytest.mark.parametrize(
+    "text, location, fragment",
+    [
+        pytest.param("geometry:\n\tshape: cylinder\n", "2:1", "'\\t'", id="tab"),
+        pytest.param("geometry:\n  shape: cylinder\nsize: [1, 2\n", "4:1", "expected ','", id="unclosed-bracket"),
+        pytest.param("geometry: shape: cylinder\n", "1:16", "mapping values are not allowed", id="nested-colon"),
+    ],
+)
 def test_broken_yaml_syntax(capsys, tmp_path, text, location, fragment):
     job = tmp_path / "job.yaml"
     job.write_text(text)
-    assert_refused(capsys, tmp_path, job, "invalid YAML", fragment, "fix the YAML syntax",
-                   where=f"{job}:{location}")
+    assert_refused(capsys, tmp_path, job, "invalid YAML", fragment, "fix the YAML syntax", where=f"{job}:{location}")
 
 
 def test_job_file_not_utf8(capsys, tmp_path):
@@ -400,11 +422,14 @@ def test_empty_job_file(capsys, tmp_path, text):
     assert_refused(capsys, tmp_path, job, "empty", where=f"{job}:1:1")
 
 
-@pytest.mark.parametrize("text", [
-    pytest.param("- geometry:\n    shape: cylinder\n", id="list"),
-    pytest.param("just a sentence\n", id="string"),
-    pytest.param("42\n", id="number"),
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        pytest.param("- geometry:\n    shape: cylinder\n", id="list"),
+        pytest.param("just a sentence\n", id="string"),
+        pytest.param("42\n", id="number"),
+    ],
+)
 def test_top_level_not_a_mapping(capsys, tmp_path, text):
     job = tmp_path / "job.yaml"
     job.write_text(text)
@@ -412,35 +437,45 @@ def test_top_level_not_a_mapping(capsys, tmp_path, text):
 
 
 def test_unknown_top_level_key(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         size: 10
         sizes: 2.5
         output:
           directory: out
-        """)
-    line = assert_refused(capsys, tmp_path, job, "unknown key 'sizes' at the top level", "allowed keys:",
-                          where=f"{job}:4:1")
+        """,
+    )
+    line = assert_refused(
+        capsys, tmp_path, job, "unknown key 'sizes' at the top level", "allowed keys:", where=f"{job}:4:1"
+    )
     for key in ("geometry", "size", "packer", "mesher", "seed", "output"):
         assert re.search(rf"\b{key}\b", line.split("allowed keys:")[1]), key
 
 
 def test_unknown_key_in_geometry(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
           colour: red
         output:
           directory: out
-        """)
-    line = assert_refused(capsys, tmp_path, job, "unknown key 'colour' in 'geometry'", "allowed keys:",
-                          where=f"{job}:3:3")
+        """,
+    )
+    line = assert_refused(
+        capsys, tmp_path, job, "unknown key 'colour' in 'geometry'", "allowed keys:", where=f"{job}:3:3"
+    )
     assert "shape" in line and "file" in line and "allow_multiple_solids" in line
 
 
 def test_unknown_shape_parameter(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
           parameters:
@@ -448,154 +483,206 @@ def test_unknown_shape_parameter(capsys, tmp_path):
             diameter: 10
         output:
           directory: out
-        """)
-    line = assert_refused(capsys, tmp_path, job, "unknown key 'diameter'", "cylinder", "allowed keys:",
-                          where=f"{job}:5:5")
+        """,
+    )
+    line = assert_refused(
+        capsys, tmp_path, job, "unknown key 'diameter'", "cylinder", "allowed keys:", where=f"{job}:5:5"
+    )
     assert "radius" in line.split("allowed keys:")[1] and "height" in line.split("allowed keys:")[1]
 
 
-@pytest.mark.parametrize("value, fragment", [
-    pytest.param('"big"', "must be number, got string 'big'", id="string"),
-    pytest.param("[1, 2]", "must be number, got a list", id="list"),
-    pytest.param("true", "must be number, got boolean", id="bool"),
-    pytest.param("0", "must be a finite number > 0, got 0", id="zero"),
-    pytest.param("-1", "must be a finite number > 0, got -1", id="negative"),
-    pytest.param(".nan", "must be a finite number > 0, got nan", id="nan"),
-    pytest.param(".inf", "must be a finite number > 0, got inf", id="inf"),
-])
+@pytest.mark.parametrize(
+    "value, fragment",
+    [
+        pytest.param('"big"', "must be number, got string 'big'", id="string"),
+        pytest.param("[1, 2]", "must be number, got a list", id="list"),
+        pytest.param("true", "must be number, got boolean", id="bool"),
+        pytest.param("0", "must be a finite number > 0, got 0", id="zero"),
+        pytest.param("-1", "must be a finite number > 0, got -1", id="negative"),
+        pytest.param(".nan", "must be a finite number > 0, got nan", id="nan"),
+        pytest.param(".inf", "must be a finite number > 0, got inf", id="inf"),
+    ],
+)
 def test_bad_size(capsys, tmp_path, value, fragment):
-    job = write_job(tmp_path, f"""
+    job = write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: cylinder
         size: {value}
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "'size'", fragment, where=f"{job}:3:1")
 
 
-@pytest.mark.parametrize("value, fragment", [
-    pytest.param("1.5", "'seed' must be integer, got number 1.5", id="float"),
-    pytest.param("abc", "'seed' must be integer, got string 'abc'", id="string"),
-])
+@pytest.mark.parametrize(
+    "value, fragment",
+    [
+        pytest.param("1.5", "'seed' must be integer, got number 1.5", id="float"),
+        pytest.param("abc", "'seed' must be integer, got string 'abc'", id="string"),
+    ],
+)
 def test_bad_seed(capsys, tmp_path, value, fragment):
-    job = write_job(tmp_path, f"""
+    job = write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: cylinder
         size: 10
         seed: {value}
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, fragment, where=f"{job}:4:1")
 
 
 def test_negative_seed(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         size: 20
         seed: -1
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "'seed'", where=f"{job}:4:1")
 
 
 def test_size_in_exponent_notation_is_a_number(capsys, tmp_path):
     write_obj(tmp_path / "cube.obj", *cube())
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           file: cube.obj
         size: 2.5e0
         output:
           directory: out
-        """)
+        """,
+    )
     assert_meshed(capsys, tmp_path, job)
 
 
 def test_unknown_shape(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: donut
         output:
           directory: out
-        """)
-    line = assert_refused(capsys, tmp_path, job, "'geometry.shape' is 'donut', which is not known",
-                          "choose one of:", where=f"{job}:2:3")
+        """,
+    )
+    line = assert_refused(
+        capsys, tmp_path, job, "'geometry.shape' is 'donut', which is not known", "choose one of:", where=f"{job}:2:3"
+    )
     for shape in ("cylinder", "plate", "plate_with_hole", "plate_cylinder_junction", "l_bracket", "cracked_plate"):
         assert shape in line
 
 
 def test_unknown_packer(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         packer: bubbles-of-doom
         output:
           directory: out
-        """)
-    assert_refused(capsys, tmp_path, job, "'packer' is 'bubbles-of-doom', which is not known",
-                   "choose one of:", "lattice", where=f"{job}:3:1")
+        """,
+    )
+    assert_refused(
+        capsys,
+        tmp_path,
+        job,
+        "'packer' is 'bubbles-of-doom', which is not known",
+        "choose one of:",
+        "lattice",
+        where=f"{job}:3:1",
+    )
 
 
 def test_unknown_mesher(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         mesher: advancing-front-9000
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "'mesher' is 'advancing-front-9000'", "delaunay", where=f"{job}:3:1")
 
 
 def test_geometry_with_shape_and_file(capsys, tmp_path):
     write_obj(tmp_path / "cube.obj", *cube())
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
           file: cube.obj
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "exactly one of 'shape' or 'file'", where=f"{job}:2:3")
 
 
-@pytest.mark.parametrize("geometry, location", [
-    pytest.param("geometry:\n  allow_multiple_solids: true\n", "2:3", id="other-key-only"),
-    pytest.param("geometry: {}\n", "1:11", id="empty-mapping"),
-])
+@pytest.mark.parametrize(
+    "geometry, location",
+    [
+        pytest.param("geometry:\n  allow_multiple_solids: true\n", "2:3", id="other-key-only"),
+        pytest.param("geometry: {}\n", "1:11", id="empty-mapping"),
+    ],
+)
 def test_geometry_with_neither_shape_nor_file(capsys, tmp_path, geometry, location):
     job = tmp_path / "job.yaml"
     job.write_text(geometry + "output:\n  directory: out\n")
     assert_refused(capsys, tmp_path, job, "exactly one of 'shape' or 'file'", where=f"{job}:{location}")
 
 
-@pytest.mark.parametrize("text", [
-    pytest.param("output:\n  directory: out\n", id="no-geometry-key"),
-    pytest.param("geometry:\noutput:\n  directory: out\n", id="geometry-null"),
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        pytest.param("output:\n  directory: out\n", id="no-geometry-key"),
+        pytest.param("geometry:\noutput:\n  directory: out\n", id="geometry-null"),
+    ],
+)
 def test_geometry_missing(capsys, tmp_path, text):
     job = tmp_path / "job.yaml"
     job.write_text(text)
     assert_refused(capsys, tmp_path, job, "missing key 'geometry'", "add 'geometry:'", where=f"{job}:1:1")
 
 
-@pytest.mark.parametrize("formats, fragment", [
-    pytest.param("[vtu, stl]", "unknown or no formats ['stl']", id="unknown"),
-    pytest.param("[]", "unknown or no formats", id="empty"),
-    pytest.param("vtu", "'output.formats' must be list", id="not-a-list"),
-])
+@pytest.mark.parametrize(
+    "formats, fragment",
+    [
+        pytest.param("[vtu, stl]", "unknown or no formats ['stl']", id="unknown"),
+        pytest.param("[]", "unknown or no formats", id="empty"),
+        pytest.param("vtu", "'output.formats' must be list", id="not-a-list"),
+    ],
+)
 def test_bad_output_formats(capsys, tmp_path, formats, fragment):
-    job = write_job(tmp_path, f"""
+    job = write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: cylinder
         size: 10
         output:
           directory: out
           formats: {formats}
-        """)
+        """,
+    )
     line = assert_refused(capsys, tmp_path, job, fragment, where=f"{job}:6:3")
     if "unknown" in fragment:
         assert "allowed: vtu, msh" in line
@@ -603,13 +690,16 @@ def test_bad_output_formats(capsys, tmp_path, formats, fragment):
 
 def test_output_directory_is_a_file(capsys, tmp_path):
     write_obj(tmp_path / "cube.obj", *cube())
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           file: cube.obj
         size: 2.5
         output:
           directory: cube.obj
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "is an existing file", "name a folder", where=f"{job}:5:3")
 
 
@@ -621,20 +711,25 @@ def test_output_target_is_a_directory(capsys, tmp_path):
 
 
 def test_empty_output_name(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         size: 20
         output:
           directory: out
           name: ''
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "'output.name'", where=f"{job}:6:3")
 
 
 def test_parameters_with_file(capsys, tmp_path):
     write_obj(tmp_path / "cube.obj", *cube())
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           file: cube.obj
           parameters:
@@ -642,9 +737,11 @@ def test_parameters_with_file(capsys, tmp_path):
         size: 2.5
         output:
           directory: out
-        """)
-    assert_refused(capsys, tmp_path, job, "'parameters' is for built-in shapes only", "use 'shape:'",
-                   where=f"{job}:3:3")
+        """,
+    )
+    assert_refused(
+        capsys, tmp_path, job, "'parameters' is for built-in shapes only", "use 'shape:'", where=f"{job}:3:3"
+    )
 
 
 INCONSISTENT_SHAPES = {
@@ -658,14 +755,17 @@ INCONSISTENT_SHAPES = {
 
 def _inconsistent_shape_job(tmp_path, shape):
     parameters = INCONSISTENT_SHAPES[shape][0]
-    return write_job(tmp_path, f"""
+    return write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: {shape}
           parameters: {parameters}
         size: 10
         output:
           directory: out
-        """)
+        """,
+    )
 
 
 @pytest.mark.parametrize("shape", INCONSISTENT_SHAPES)
@@ -686,13 +786,18 @@ def test_inconsistent_shape_parameters_names_the_job_file(capsys, tmp_path, shap
     assert f"{ERROR_PREFIX} {job}:3:3: " in line, line
 
 
-@pytest.mark.parametrize("shape, parameter, value", [
-    ("plate_with_hole", "hole_x", ".nan"),
-    ("plate_with_hole", "hole_y", ".inf"),
-    ("plate_cylinder_junction", "offset", ".nan"),
-])
+@pytest.mark.parametrize(
+    "shape, parameter, value",
+    [
+        ("plate_with_hole", "hole_x", ".nan"),
+        ("plate_with_hole", "hole_y", ".inf"),
+        ("plate_cylinder_junction", "offset", ".nan"),
+    ],
+)
 def test_non_finite_shape_position(capsys, tmp_path, shape, parameter, value):
-    job = write_job(tmp_path, f"""
+    job = write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: {shape}
           parameters:
@@ -700,19 +805,22 @@ def test_non_finite_shape_position(capsys, tmp_path, shape, parameter, value):
         size: 10
         output:
           directory: out
-        """)
-    assert_refused(capsys, tmp_path, job, f"'geometry.parameters ({shape}).{parameter}'", "finite",
-                   where=f"{job}:4:5")
+        """,
+    )
+    assert_refused(capsys, tmp_path, job, f"'geometry.parameters ({shape}).{parameter}'", "finite", where=f"{job}:4:5")
 
 
 def _junction_too_fine(tmp_path):
-    return write_job(tmp_path, """
+    return write_job(
+        tmp_path,
+        """
         geometry:
           shape: plate_cylinder_junction
         size: 0.001
         output:
           directory: out
-        """)
+        """,
+    )
 
 
 def test_impossible_size_hits_element_limit(capsys, tmp_path):
@@ -726,13 +834,16 @@ def test_impossible_size_hits_element_limit(capsys, tmp_path):
 
 def test_max_elements_option_is_honoured(capsys, tmp_path):
     # the junction at size 8 needs far more than 10 tetrahedra: the limit given on the command line applies
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: plate_cylinder_junction
         size: 8
         output:
           directory: out
-        """)
+        """,
+    )
     code, _, err = run_cli(capsys, job, "--max-elements", "10")
     line = error_line(err)
     assert code == 2 and "(limit 10)" in line
@@ -746,19 +857,24 @@ def test_impossible_size_names_the_job_file(capsys, tmp_path):
 
 
 def test_duplicate_key(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         size: 10
         size: 5
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "duplicate key 'size'", "once", where=f"{job}:4:1")
 
 
 def test_duplicate_nested_key(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
           parameters:
@@ -766,18 +882,22 @@ def test_duplicate_nested_key(capsys, tmp_path):
             radius: 6
         output:
           directory: out
-        """)
+        """,
+    )
     assert_refused(capsys, tmp_path, job, "duplicate key 'radius'", where=f"{job}:5:5")
 
 
 def test_yaml_is_loaded_safely(capfd, tmp_path):
     marker = tmp_path / "hacked"
-    job = write_job(tmp_path, f"""
+    job = write_job(
+        tmp_path,
+        f"""
         geometry:
           shape: !!python/object/apply:os.system ["echo hacked; touch {marker}"]
         output:
           directory: out
-        """)
+        """,
+    )
     code, out, err = run_cli(capfd, job)  # file-descriptor level: would see the shell's echo
     line = error_line(err)
     assert code == 2
@@ -788,12 +908,15 @@ def test_yaml_is_loaded_safely(capfd, tmp_path):
 
 
 def test_bad_command_line_size(capsys, tmp_path):
-    job = write_job(tmp_path, """
+    job = write_job(
+        tmp_path,
+        """
         geometry:
           shape: cylinder
         output:
           directory: out
-        """)
+        """,
+    )
     try:
         code = main(["mesh", str(job), "--size", "-1"])
     except SystemExit as exit_:
@@ -820,8 +943,7 @@ def test_subprocess_one_line_no_traceback(tmp_path, case):
         job = tmp_path / "job.yaml"
         job.write_text("geometry:\n  shape: [cylinder\n")
         command, expected = [sys.executable, "-m", "engine.cli"], "invalid YAML"
-    proc = subprocess.run([*command, "mesh", str(job)], capture_output=True, text=True, cwd=tmp_path,
-                          timeout=120)
+    proc = subprocess.run([*command, "mesh", str(job)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert proc.stdout == ""
     assert "Traceback" not in proc.stderr

@@ -1,5 +1,6 @@
 """Batch meshing on dask.distributed (engine/batch.py, docs/batch.md): study files, a LocalCluster of 2 worker
 processes on a 6-variant junction family (one variant refused), the table, the page, resuming, Ctrl-C."""
+
 from __future__ import annotations
 
 import csv
@@ -30,8 +31,10 @@ output: {directory: out}
 
 def write_study(folder: Path, study: str = STUDY) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "base.yaml").write_text(f"geometry: {{shape: plate_cylinder_junction}}\nsize: 25\n"
-                                      f"knowledge: [{PAPER_SIZING}]\noutput: {{formats: [vtu]}}\n")
+    (folder / "base.yaml").write_text(
+        f"geometry: {{shape: plate_cylinder_junction}}\nsize: 25\n"
+        f"knowledge: [{PAPER_SIZING}]\noutput: {{formats: [vtu]}}\n"
+    )
     (folder / "study.yaml").write_text(study)
     return folder / "study.yaml"
 
@@ -41,23 +44,31 @@ def test_a_grid_crosses_ranges_and_lists_and_zips_keys_together(tmp_path):
     assert [v.name for v in study.variants] == [f"radius-{r}_offset-{o}" for r in (15, 20, 25) for o in (60, 75)]
     assert study.variants[1].job["geometry"]["parameters"] == {"radius": 15, "offset": 75}
     assert {Path(v.directory).parent for v in study.variants} == {(tmp_path / "out" / "variants").resolve()}
-    zipped = load_study(write_study(tmp_path, "job: base.yaml\nzip: {seed: [0, 1], output.order: [1, 2]}\n"
-                                              "cross: {size: {from: 20, to: 30, count: 3}}\n"))
-    assert [(v.job["size"], v.job["seed"], v.job["output"]["order"]) for v in zipped.variants] == \
-        [(s, seed, seed + 1) for s in (20.0, 25.0, 30.0) for seed in (0, 1)]
+    zipped = load_study(
+        write_study(
+            tmp_path,
+            "job: base.yaml\nzip: {seed: [0, 1], output.order: [1, 2]}\ncross: {size: {from: 20, to: 30, count: 3}}\n",
+        )
+    )
+    assert [(v.job["size"], v.job["seed"], v.job["output"]["order"]) for v in zipped.variants] == [
+        (s, seed, seed + 1) for s in (20.0, 25.0, 30.0) for seed in (0, 1)
+    ]
     assert len({v.digest for v in zipped.variants}) == 6, "every variant is a different job"
 
 
-@pytest.mark.parametrize("study, message, line", [
-    ("job: base.yaml\ncross: {radius: [10, 20]}\nzip: {seed: [0, 1], size: [5]}\n", "different lengths", 3),
-    ("job: base.yaml\ncross:\n  radiu: [10, 20]\n", "neither a job key nor a parameter", 3),
-    ("job: base.yaml\ncross:\n  radius: [10, -1]\n", "'radius' must be", 3),
-    ("job: base.yaml\ncross:\n  size: {from: 10, to: 20}\n", "exactly one of 'step' or 'count'", 3),
-    ("job: base.yaml\ncross:\n  output.directory: [a, b]\n", "the study sets output.directory", 3),
-    ("job: base.yaml\nfiles: parts/*.stl\n", "names no geometry file", 2),
-    ("job: base.yaml\ncross: {seed: [1, 1]}\n", "more than once", 1),
-    ("job: base.yaml\ngrid: {seed: [1]}\n", "unknown key 'grid'", 2),
-])
+@pytest.mark.parametrize(
+    "study, message, line",
+    [
+        ("job: base.yaml\ncross: {radius: [10, 20]}\nzip: {seed: [0, 1], size: [5]}\n", "different lengths", 3),
+        ("job: base.yaml\ncross:\n  radiu: [10, 20]\n", "neither a job key nor a parameter", 3),
+        ("job: base.yaml\ncross:\n  radius: [10, -1]\n", "'radius' must be", 3),
+        ("job: base.yaml\ncross:\n  size: {from: 10, to: 20}\n", "exactly one of 'step' or 'count'", 3),
+        ("job: base.yaml\ncross:\n  output.directory: [a, b]\n", "the study sets output.directory", 3),
+        ("job: base.yaml\nfiles: parts/*.stl\n", "names no geometry file", 2),
+        ("job: base.yaml\ncross: {seed: [1, 1]}\n", "more than once", 1),
+        ("job: base.yaml\ngrid: {seed: [1]}\n", "unknown key 'grid'", 2),
+    ],
+)
 def test_a_bad_study_is_refused_with_one_located_line(tmp_path, study, message, line):
     path = write_study(tmp_path, study)
     with pytest.raises(JobError) as error:
@@ -98,8 +109,9 @@ def test_the_study_meshes_every_variant_and_refuses_one_without_stopping_the_oth
         vtu = meshio.read(Path(row["directory"]) / "mesh.vtu")
         assert row["tetrahedra"] == len(vtu.cells_dict["tetra"]) > 0 and row["nodes"] == len(vtu.points)
         assert row["min_dihedral"] >= 5 and 0 < row["conformity_within"] <= 1
-        assert row["time_packing"] > 0 and row["time_total"] >= sum(v for k, v in row.items()
-                                                                    if k.startswith("time_") and k != "time_total")
+        assert row["time_packing"] > 0 and row["time_total"] >= sum(
+            v for k, v in row.items() if k.startswith("time_") and k != "time_total"
+        )
         assert 50 < row["peak_memory_mb"] < 4000
     assert len({r["tetrahedra"] for r in rows[:5]}) > 1, "the radius changes the mesh"
     assert not list(path.parent.rglob(".*")), "no temporary files left"
@@ -140,12 +152,17 @@ def test_the_command_line_refuses_a_bad_study_with_one_line(tmp_path, capsys):
 def test_ctrl_c_stops_the_study_and_leaves_no_partial_files(tmp_path):
     path = write_study(tmp_path, STUDY.replace("[60, 75]", "[60, 70, 75]"))
     env = {k: v for k, v in os.environ.items() if k != "DASK_SCHEDULER_ADDRESS"}
-    run = subprocess.Popen([sys.executable, "-m", "engine.cli", "batch", str(path), "--workers", "2", "-q"],
-                           env=env, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    run = subprocess.Popen(
+        [sys.executable, "-m", "engine.cli", "batch", str(path), "--workers", "2", "-q"],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     deadline = time.time() + 60
     while not list(tmp_path.glob("out/variants/*/variant.json")) and time.time() < deadline:
         time.sleep(0.2)
-    os.killpg(run.pid, signal.SIGINT)          # as a terminal's Ctrl-C: the whole process group
+    os.killpg(run.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
     assert run.wait(timeout=60) == 130, run.stderr.read()
     assert not list(tmp_path.rglob(".*")), "no temporary files left"
     assert not (tmp_path / "out" / "study.csv").exists()

@@ -1,5 +1,6 @@
 """The benchmark harness (bench/run.py) on a tiny case, so it does not rot: it runs every mesher, writes
 every figure, Gmsh sees our sizes, and the ratios are the ratios of the figures."""
+
 from __future__ import annotations
 
 import json
@@ -11,7 +12,7 @@ from pathlib import Path
 import pytest
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-sys.path.insert(0, str(BENCH))   # the bench scripts import each other as top-level modules
+sys.path.insert(0, str(BENCH))  # the bench scripts import each other as top-level modules
 
 from harness import FIGURES, MESH_STAGES  # noqa: E402
 
@@ -23,9 +24,24 @@ def tiny(tmp_path_factory):
     """bench/run.py on the junction at the plate centre with every size x 8, one run each: 8k-14k
     tets (the curvature and thin-wall rules of knowledge/sizing.yaml floor the sizes whatever the scale)."""
     out = tmp_path_factory.mktemp("bench")
-    done = subprocess.run([sys.executable, str(BENCH / "run.py"), "--cases", "junction-centre", "--scale", "8",
-                           "--repeats", "1", "--no-warm-up", "--out", str(out)],
-                          capture_output=True, text=True, timeout=900)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(BENCH / "run.py"),
+            "--cases",
+            "junction-centre",
+            "--scale",
+            "8",
+            "--repeats",
+            "1",
+            "--no-warm-up",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return out, json.loads((out / "results.json").read_text())
 
@@ -43,11 +59,11 @@ def test_every_mesher_measured(tiny):
         assert math.isclose(entry["mesh_seconds"], sum(entry["seconds"][s] for s in MESH_STAGES[name]), rel_tol=1e-9)
         for key in FIGURES:
             assert entry[key] > 0, (name, key)
-        assert 500 < entry["tets"] < 20_000 and entry["nodes"] < entry["tets"]   # ours 14k: h is the mean edge
+        assert 500 < entry["tets"] < 20_000 and entry["nodes"] < entry["tets"]  # ours 14k: h is the mean edge
         assert entry["peak_mb"] >= entry["start_mb"] > 10
         assert 0 < entry["min_dihedral"] <= entry["p01_dihedral"] < 70.6
         assert 0 < entry["conformity_within"] <= 1 and entry["inverted"] == 0
-        assert abs(entry["volume_error"]) < 0.02   # h ~ 13 chords on the r = 25 cylinder
+        assert abs(entry["volume_error"]) < 0.02  # h ~ 13 chords on the r = 25 cylinder
     fuzzymesh = row["meshers"]["fuzzymesh"]
     assert {"packing", "meshing", "quality", "audit"} <= set(fuzzymesh["seconds"])
     assert fuzzymesh["peak_mb_pipeline"] >= fuzzymesh["peak_mb"]
@@ -105,15 +121,27 @@ def test_targets_of_a_1m_row():
     """At the 1M tier: time against Gmsh Delaunay, memory against 2 GB, angle against HXT."""
     from results import targets
 
-    row = {"case": "junction-edge", "tier": "1M", "meshers": {
-        "fuzzymesh": {"mesh_seconds": 20.0, "analysis_seconds": 6.0, "peak_mb": 900, "peak_mb_pipeline": 2100,
-                      "min_dihedral": 20.0},
-        "gmsh-delaunay": {"mesh_seconds": 25.0, "min_dihedral": 11.0},
-        "gmsh-hxt": {"mesh_seconds": 3.0, "min_dihedral": 20.5}}}
+    row = {
+        "case": "junction-edge",
+        "tier": "1M",
+        "meshers": {
+            "fuzzymesh": {
+                "mesh_seconds": 20.0,
+                "analysis_seconds": 6.0,
+                "peak_mb": 900,
+                "peak_mb_pipeline": 2100,
+                "min_dihedral": 20.0,
+            },
+            "gmsh-delaunay": {"mesh_seconds": 25.0, "min_dihedral": 11.0},
+            "gmsh-hxt": {"mesh_seconds": 3.0, "min_dihedral": 20.5},
+        },
+    }
     met = {t["target"]: t["met"] for t in targets({"rows": [row]})}
-    assert met == {"junction-edge 1M: meshing time <= Gmsh Delaunay's": True,
-                   "junction-edge 1M: peak memory <= 2048 MB": False,
-                   "junction-edge 1M: min dihedral >= Gmsh HXT's": False}
+    assert met == {
+        "junction-edge 1M: meshing time <= Gmsh Delaunay's": True,
+        "junction-edge 1M: peak memory <= 2048 MB": False,
+        "junction-edge 1M: min dihedral >= Gmsh HXT's": False,
+    }
 
 
 def test_missing_gmsh_is_one_line(monkeypatch):

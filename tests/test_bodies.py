@@ -1,5 +1,6 @@
 """Several bodies in one surface: each its own group and `body` field; bodies that touch or overlap are
 refused with one line naming how many bodies the file holds; a cavity belongs to the body around it."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,8 +13,12 @@ from engine.geometry import validate_surface
 
 def boxes(*placed) -> trimesh.Trimesh:
     """Boxes of the given (extents, centre) in one surface, in that order."""
-    return trimesh.util.concatenate([trimesh.creation.box(extents, trimesh.transformations.translation_matrix(centre))
-                                     for extents, centre in placed])
+    return trimesh.util.concatenate(
+        [
+            trimesh.creation.box(extents, trimesh.transformations.translation_matrix(centre))
+            for extents, centre in placed
+        ]
+    )
 
 
 CUBE = (10, 10, 10)
@@ -37,13 +42,16 @@ def test_a_cavity_and_an_island_in_it():
     assert geometry.bodies == 2 and np.bincount(geometry.face_body).tolist() == [24, 12]
 
 
-@pytest.mark.parametrize("second, message", [
-    ((CUBE, (5, 5, 5)), "the surface holds 2 bodies and bodies 1 and 2 touch or overlap"),    # overlap
-    ((CUBE, (10, 10, 10)), "bodies 1 and 2 touch"),                                              # a shared corner
-    ((CUBE, (10, 3, 0)), "bodies 1 and 2 touch"),                                                # faces in contact
-    (((2, 30, 2), (0, 0, 0)), "bodies 1 and 2 touch"),                                           # bars crossing
-    (((4, 4, 4), (3, 0, 0)), "holds 1 body and two shells of body 1"),                           # cavity on the wall
-])
+@pytest.mark.parametrize(
+    "second, message",
+    [
+        ((CUBE, (5, 5, 5)), "the surface holds 2 bodies and bodies 1 and 2 touch or overlap"),  # overlap
+        ((CUBE, (10, 10, 10)), "bodies 1 and 2 touch"),  # a shared corner
+        ((CUBE, (10, 3, 0)), "bodies 1 and 2 touch"),  # faces in contact
+        (((2, 30, 2), (0, 0, 0)), "bodies 1 and 2 touch"),  # bars crossing
+        (((4, 4, 4), (3, 0, 0)), "holds 1 body and two shells of body 1"),  # cavity on the wall
+    ],
+)
 def test_touching_or_overlapping_shells_are_refused(second, message):
     first = ((30, 2, 2), (0, 0, 0)) if second[0] == (2, 30, 2) else (CUBE, (0, 0, 0))
     surface = boxes(first, second)
@@ -68,8 +76,15 @@ def mesh_job(folder, surface: trimesh.Trimesh, **geometry) -> tuple[int, object]
 
     surface.export(folder / "parts.stl")
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"file": "parts.stl", **geometry}, "size": 2.5,
-                                   "output": {"formats": ["vtu", "msh", "inp", "med"]}}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"file": "parts.stl", **geometry},
+                "size": 2.5,
+                "output": {"formats": ["vtu", "msh", "inp", "med"]},
+            }
+        )
+    )
     return main(["mesh", str(job), "--quiet"]), folder / "out"
 
 
@@ -115,8 +130,9 @@ def test_a_box_with_a_cavity_is_one_body(tmp_path):
 
 
 def test_overlapping_boxes_exit_2_with_one_line_and_no_files(tmp_path, capsys):
-    code, out = mesh_job(tmp_path, boxes((CUBE, (0, 0, 0)), (CUBE, (6, 0, 0)), (CUBE, (40, 0, 0))),
-                         allow_multiple_solids=True)
+    code, out = mesh_job(
+        tmp_path, boxes((CUBE, (0, 0, 0)), (CUBE, (6, 0, 0)), (CUBE, (40, 0, 0))), allow_multiple_solids=True
+    )
     err = capsys.readouterr().err
     assert code == 2 and not out.exists()
     (line,) = err.strip().splitlines()

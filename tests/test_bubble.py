@@ -1,9 +1,10 @@
 """The bubble packer: regular spacing, bubbles on their entities, counts, fuzzy population control."""
+
+import igl
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-import igl
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
 from engine.packing import CURVE, PATCH, VOLUME, get_packer
@@ -27,7 +28,7 @@ def pack(job, packer="bubble", **options):
     return get_packer(packer)(geometry, features, sizing, seed=0, knowledge=KB, **options)
 
 
-DIAMETER = KB.packer_settings["population"]["diameter"]   # bubble diameter / h
+DIAMETER = KB.packer_settings["population"]["diameter"]  # bubble diameter / h
 
 
 def spacing_share(packing, sizing, diameter=1.0):
@@ -51,8 +52,10 @@ def test_bubbles_settle_at_the_stable_distance(job):
     lattice = pack(job, "lattice")
     share, baseline = spacing_share(bubble, sizing, DIAMETER), spacing_share(lattice, sizing)
     initial = bubble.stats["initial_nearest_over_r0"]["within_0.85_1.15"]
-    print(f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice {baseline:.3f}, "
-          f"bubble's initial placement {initial:.3f}")
+    print(
+        f"nearest neighbour within [0.85, 1.15] r0: bubble {share:.3f}, lattice {baseline:.3f}, "
+        f"bubble's initial placement {initial:.3f}"
+    )
     assert share == pytest.approx(bubble.stats["nearest_over_r0"]["within_0.85_1.15"])
     assert share >= 0.90
     assert share > baseline + 0.2

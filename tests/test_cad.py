@@ -1,11 +1,13 @@
 """CAD input (issue 17): STEP files written by Gmsh's OpenCASCADE here, read back through engine/cad.py.
 
 Parts: a box with two holes, the corpus's filleted bracket and lofted handle (tests/parts/make_parts.py), the
-plate-cylinder junction, a hole whose wall is two faces, two boxes apart and two touching boxes. Checked: each CAD face a patch named face-N with its type, holes and
-fillets with the CAD's radii, the junction's concave circle, exact surfaces (mesh nodes and 10-node
-mid-nodes on the CAD faces), the volume against the CAD's, the pipeline's gate and files, and the STEP
+plate-cylinder junction, a hole whose wall is two faces, two boxes apart and two touching boxes. Checked: each
+CAD face a patch named face-N with its type, holes and fillets with the CAD's radii, the junction's concave
+circle, exact surfaces (mesh nodes and 10-node mid-nodes on the CAD faces), the volume against the CAD's, the
+pipeline's gate and files, and the STEP
 part against its STL export.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -18,7 +20,7 @@ import pytest
 
 from engine.describe import solid_features
 from engine.errors import GeometryError
-from engine.fe import quadratic, tet_boundary, side_cells
+from engine.fe import quadratic, side_cells, tet_boundary
 from engine.job import job_from_dict
 from engine.pipeline import run
 
@@ -30,8 +32,11 @@ occ = gmsh.model.occ
 
 def box_with_holes():
     """A 100 x 60 x 20 box with through holes of radius 6 and 4."""
-    return make_parts._cut(occ.addBox(0, 0, 0, 100, 60, 20), occ.addCylinder(30, 30, -1, 0, 0, 22, 6),
-                           occ.addCylinder(70, 30, -1, 0, 0, 22, 4))
+    return make_parts._cut(
+        occ.addBox(0, 0, 0, 100, 60, 20),
+        occ.addCylinder(30, 30, -1, 0, 0, 22, 6),
+        occ.addCylinder(70, 30, -1, 0, 0, 22, 4),
+    )
 
 
 def junction():
@@ -65,9 +70,16 @@ def apart():
     make_parts._cut(occ.addBox(50, 0, 0, 30, 30, 20), occ.addCylinder(65, 15, -1, 0, 0, 22, 5))
 
 
-PARTS = {"box_with_holes": box_with_holes, "bracket": make_parts.bracket, "junction": junction,
-         "two_boxes": two_boxes, "apart": apart, "split_hole": split_hole,
-         "faces_only": faces_only, "lofted_handle": make_parts.lofted_handle}
+PARTS = {
+    "box_with_holes": box_with_holes,
+    "bracket": make_parts.bracket,
+    "junction": junction,
+    "two_boxes": two_boxes,
+    "apart": apart,
+    "split_hole": split_hole,
+    "faces_only": faces_only,
+    "lofted_handle": make_parts.lofted_handle,
+}
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +98,7 @@ def step_files(tmp_path_factory):
             build()
             occ.synchronize()
             path = folder / f"{name}.step"
-            gmsh.write(str(path))         # OpenCASCADE's STEP writer prints its statistics
+            gmsh.write(str(path))  # OpenCASCADE's STEP writer prints its statistics
             out[name] = (path, sum(occ.getMass(3, tag) for _, tag in occ.getEntities(3)) or None)
             if name == "box_with_holes":
                 for suffix in ("brep", "igs"):
@@ -104,7 +116,7 @@ def test_faces_are_named_patches_with_kinds_from_their_types(step_files):
     assert sorted(p.surface for p in features.patches) == ["Cylinder"] * 2 + ["Plane"] * 6
     assert all(len(p.names) == 1 and p.names[0].startswith("face-") for p in features.patches)
     holes = sorted(p.cylinder.radius for p in features.patches if "hole" in p.kinds)
-    assert holes == [4.0, 6.0]                      # the CAD's radii, not a fit
+    assert holes == [4.0, 6.0]  # the CAD's radii, not a fit
     assert all(c.names and c.names[0].startswith("edge-") for c in features.curves)
     assert geometry.volume == pytest.approx(step_files["box_with_holes"][1], rel=2e-3)
 
@@ -127,8 +139,13 @@ def test_junction_is_a_concave_circle(step_files):
 
 
 def _job(path: Path, tmp_path: Path, order: int = 1, **keys):
-    return job_from_dict({"geometry": {"file": str(path)}, "output": {
-        "directory": str(tmp_path / "out"), "formats": ["vtu", "msh", "inp"], "order": order}, **keys})
+    return job_from_dict(
+        {
+            "geometry": {"file": str(path)},
+            "output": {"directory": str(tmp_path / "out"), "formats": ["vtu", "msh", "inp"], "order": order},
+            **keys,
+        }
+    )
 
 
 def _off_surface(points: np.ndarray, triangles: np.ndarray, patch: np.ndarray, surfaces: list) -> float:
@@ -186,7 +203,7 @@ def test_step_lengths_are_read_in_millimetres(step_files, tmp_path):
 
 def test_a_file_of_faces_is_healed_into_a_solid(step_files):
     _, geometry, features = solid_features(step_files["faces_only"][0])
-    assert geometry.volume == pytest.approx(10 * 20 * 30 - math.pi * 3 ** 2 * 30, rel=2e-3)
+    assert geometry.volume == pytest.approx(10 * 20 * 30 - math.pi * 3**2 * 30, rel=2e-3)
     assert [p.cylinder.radius for p in features.patches if "hole" in p.kinds] == [3.0]
 
 

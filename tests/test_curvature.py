@@ -2,6 +2,7 @@
 curvature pattern (at least 'per_circle' elements per full circle, dominance 'tie'): its accuracy on a
 cylinder, spheres and tori from trimesh, OpenCASCADE and Gmsh tessellations, and meshes of a torus ring, a box
 and the junction."""
+
 import importlib.util
 import json
 import re
@@ -73,8 +74,9 @@ def within(radius, expected, tolerance):
 
 # ------------------------------------------------------------------------------------------ measure
 
+
 def test_faceted_cylinder_exact_its_caps_and_rims_planar():
-    cylinder = trimesh.creation.cylinder(10, 50, sections=24)      # 15 deg facets: rim edges 90 deg, creases
+    cylinder = trimesh.creation.cylinder(10, 50, sections=24)  # 15 deg facets: rim edges 90 deg, creases
     radius = measure(cylinder).radius
     side = np.abs(cylinder.face_normals[:, 2]) < 0.5
     assert np.allclose(radius[side], 10.0, rtol=1e-9)
@@ -92,10 +94,12 @@ def test_chord_curvature_of_both_principal_curvatures():
     """max(|k1|, |k2|, 2 |k1 + k2| / 3): a cylinder and a saddle by their larger curvature, a sphere by 4/3 of it
     (the centre of an equilateral triangle of edge h strays h^2 (k1 + k2) / 12 from the surface)."""
     from engine.curvature import _chord_curvature
+
     k = 0.2
-    operators = np.array([[[k, 0], [0, 0]], [[k, 0], [0, -k]], [[k, 0], [0, k]], [[-k, 0], [0, -k]],
-                          [[k / 2, 0], [0, k]]])
-    theta = 0.3    # turned in the face's plane: the same eigenvalues
+    operators = np.array(
+        [[[k, 0], [0, 0]], [[k, 0], [0, -k]], [[k, 0], [0, k]], [[-k, 0], [0, -k]], [[k / 2, 0], [0, k]]]
+    )
+    theta = 0.3  # turned in the face's plane: the same eigenvalues
     turn = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
     expected = [k, k, 4 * k / 3, 4 * k / 3, k]
     assert _chord_curvature(turn @ operators @ turn.T) == pytest.approx(expected, rel=1e-12)
@@ -130,8 +134,10 @@ def test_sharp_edges_are_creases_and_the_feature_angle_says_which():
 
 def test_classes_of_like_radius():
     """A shaft of radii 10 and 5: two classes, L the smallest radius of each; the planar faces in none."""
-    shaft = trimesh.util.concatenate(trimesh.creation.cylinder(10, 20, sections=48),
-                                     trimesh.creation.cylinder(5, 20, sections=48).apply_translation([0, 0, 20]))
+    shaft = trimesh.util.concatenate(
+        trimesh.creation.cylinder(10, 20, sections=48),
+        trimesh.creation.cylinder(5, 20, sections=48).apply_translation([0, 0, 20]),
+    )
     parts = measure(shaft).parts()
     assert [p.length for p in parts] == pytest.approx([5.0, 10.0])
     assert [len(p.triangles) for p in parts] == [96, 96]
@@ -139,6 +145,7 @@ def test_classes_of_like_radius():
 
 
 # ---------------------------------------------------------------------------------------- knowledge
+
 
 def test_always_placed_with_a_tie_and_off_where_the_radius_needs_no_more_than_h():
     pattern = KB.patterns["curvature"]
@@ -158,7 +165,10 @@ def test_patterns_show_and_lint(capsys):
     assert main(["lint"]) == 0
 
 
-JUNCTION = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 8.0}   # the cylinder (r 25, axis x = 60), no recipe
+JUNCTION = {
+    "geometry": {"shape": "plate_cylinder_junction"},
+    "size": 8.0,
+}  # the cylinder (r 25, axis x = 60), no recipe
 
 
 def test_explain_and_the_element_guard_on_the_junction():
@@ -166,18 +176,21 @@ def test_explain_and_the_element_guard_on_the_junction():
     geometry, features = build_geometry(job)
     sizing = build_sizing(job, geometry, features, KB)
     size = 2 * np.pi * 25 / PER_CIRCLE
-    text = explain_point(sizing, [60, 24.5, 60], inside=True)    # by the cylinder's wall
+    text = explain_point(sizing, [60, 24.5, 60], inside=True)  # by the cylinder's wall
     assert "curvature@radius-22.6: pattern 'curvature', mu = 0.2500, h = 6.54" in text and "(dominance tie" in text
     assert "winner: curvature@radius-22.6 (highest mu 0.2500 over runner-up base with 0.2500, a tie" in text
     assert float(re.search(r"on radius-22.6, L = (\S+)", text).group(1)) == pytest.approx(25.0, rel=1e-3)
-    assert f"element size h = {size:.3g}" in text            # 2 pi 25 / 24 = 6.54
+    assert f"element size h = {size:.3g}" in text  # 2 pi 25 / 24 = 6.54
     assert sizing.h_min == pytest.approx(size, rel=0.01)
     with pytest.raises(LimitError):
         check_element_limit(sizing, 1e4)
 
 
-WITHOUT_CURVATURE = {"kind": "sizing", "doc": "the shipped defaults without the curvature rule",
-                     "always_place": [{"pattern": "thin-wall"}, {"pattern": "narrow-gap"}]}
+WITHOUT_CURVATURE = {
+    "kind": "sizing",
+    "doc": "the shipped defaults without the curvature rule",
+    "always_place": [{"pattern": "thin-wall"}, {"pattern": "narrow-gap"}],
+}
 
 
 def test_the_junction_grows_by_less_than_30_percent(tmp_path):
@@ -194,6 +207,7 @@ def test_the_junction_grows_by_less_than_30_percent(tmp_path):
 
 
 # --------------------------------------------------------------------------------------------- meshes
+
 
 def mesh_volume(tmp_path, job: dict):
     """Mesh the job through the command line: (volume of the tets, min dihedral, winner share of curvature)."""
@@ -215,9 +229,13 @@ def test_torus_ring_at_its_default_size(tmp_path, torus_stl):
     stl = trimesh.load(torus_stl["fine"]).volume
     volume, min_dihedral, share = mesh_volume(tmp_path / "default", {"geometry": {"file": str(torus_stl["fine"])}})
     assert volume == pytest.approx(stl, rel=0.012) and min_dihedral >= 10.0 and share > 0.5
-    volume, min_dihedral, share = mesh_volume(tmp_path / "forty", {
-        "geometry": {"file": str(torus_stl["fine"])},
-        "place": [{"pattern": "uniform-domain"}, {"pattern": "curvature", "parameters": {"per_circle": 40}}]})
+    volume, min_dihedral, share = mesh_volume(
+        tmp_path / "forty",
+        {
+            "geometry": {"file": str(torus_stl["fine"])},
+            "place": [{"pattern": "uniform-domain"}, {"pattern": "curvature", "parameters": {"per_circle": 40}}],
+        },
+    )
     assert volume == pytest.approx(stl, rel=0.005) and min_dihedral >= 10.0 and share > 0.5
 
 

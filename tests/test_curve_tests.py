@@ -1,18 +1,19 @@
 """Feature kinds that test a curve's dihedral angle (``dihedral_above`` / ``dihedral_below``) and convexity,
 whatever the job's ``geometry.feature_angle`` (issue 16, item 6). The broken files are in
 tests/broken/features/dihedral-*.yaml."""
+
 from __future__ import annotations
 
 import json
 
 import numpy as np
 import pytest
+from conftest import shape_and_features
 
 from engine.cli import main
 from engine.features import classify, detect_features
 from engine.geometry import validate_surface
 from engine.knowledge import KnowledgeBase
-from conftest import shape_and_features
 
 KINDS = """\
 kind: features
@@ -73,8 +74,9 @@ def test_dihedral_tests_pick_curves_by_angle_whatever_the_feature_angle(tmp_path
     assert [c.id for c in features.curves if "steep-edge" in c.kinds] == sorted([middle.id, steep.id])
     assert [c.id for c in features.curves if "middle-edge" in c.kinds] == [middle.id]
     assert len(features.curves) == 9
-    assert {c.id for c in features.curves if "right-edge" in c.kinds} == \
-        {c.id for c in features.curves if c not in (middle, steep)}    # the 6 end edges and the right one
+    assert {c.id for c in features.curves if "right-edge" in c.kinds} == {
+        c.id for c in features.curves if c not in (middle, steep)
+    }  # the 6 end edges and the right one
     assert not any("smooth-border" in c.kinds or "concave-edge" in c.kinds for c in features.curves)
 
 

@@ -1,4 +1,5 @@
 """The whole chain through the CLI: files that meshio reads back, valid tetrahedra, the solid's volume."""
+
 import os
 import subprocess
 import sys
@@ -7,10 +8,10 @@ import meshio
 import numpy as np
 import pytest
 import yaml
+from conftest import shape_and_features
 
 from engine.cli import main
 from engine.shapes import SHAPES
-from conftest import shape_and_features
 
 
 def signed_volumes(points, tets):
@@ -35,8 +36,15 @@ def write_job(tmp_path, data):
     return path
 
 
-SIZES = {"cylinder": 5.0, "plate": 20.0, "plate_with_hole": 6.0, "plate_cylinder_junction": 12.0,
-         "l_bracket": 6.0, "cracked_plate": 12.0, "hollow_sphere_octant": 10.0}
+SIZES = {
+    "cylinder": 5.0,
+    "plate": 20.0,
+    "plate_with_hole": 6.0,
+    "plate_cylinder_junction": 12.0,
+    "l_bracket": 6.0,
+    "cracked_plate": 12.0,
+    "hollow_sphere_octant": 10.0,
+}
 
 
 @pytest.mark.parametrize("kind", sorted(SHAPES))
@@ -59,8 +67,14 @@ def test_stl_file_meshes(tmp_path):
 
 def test_default_example_as_in_the_readme(tmp_path):
     """`fuzzymesh mesh` with no job: the junction near the plate edge, written to ./out."""
-    result = subprocess.run([sys.executable, "-m", "engine.cli", "mesh"], cwd=tmp_path, capture_output=True,
-                            text=True, env={**os.environ, "PYTHONPATH": os.getcwd()}, timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-m", "engine.cli", "mesh"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.getcwd()},
+        timeout=300,
+    )
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
     shape, _ = shape_and_features("plate_cylinder_junction")
@@ -72,8 +86,15 @@ def test_default_example_as_in_the_readme(tmp_path):
 
 def test_same_seed_same_mesh_other_seed_other_mesh(tmp_path):
     def run(seed, folder):
-        job = write_job(tmp_path, {"geometry": {"shape": "l_bracket"}, "size": 8.0, "seed": seed,
-                                   "output": {"directory": folder, "formats": ["vtu"]}})
+        job = write_job(
+            tmp_path,
+            {
+                "geometry": {"shape": "l_bracket"},
+                "size": 8.0,
+                "seed": seed,
+                "output": {"directory": folder, "formats": ["vtu"]},
+            },
+        )
         assert main(["mesh", str(job), "--quiet"]) == 0
         return meshio.read(tmp_path / folder / "mesh.vtu")
 

@@ -1,6 +1,7 @@
 """Exact surfaces (engine/exact.py, issue 15 item 1): the nodes and 10-node mid-edge nodes that `fuzzymesh mesh`
 writes lie on the planes, cylinders and spheres of the solid, not on its facets, and `fuzzymesh validate`
 solves on exactly those nodes."""
+
 from __future__ import annotations
 
 import math
@@ -35,15 +36,18 @@ def test_fits_recognise_planes_cylinders_and_spheres_and_nothing_else():
     assert isinstance(plane, Plane) and abs(plane.normal[2]) == pytest.approx(1.0)
     rng = np.random.default_rng(0)
     directions = rng.normal(size=(200, 3))
-    sphere = fit_surface(5.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True) + [1, 2, 3], False,
-                         None, tolerance)
+    sphere = fit_surface(
+        5.0 * directions / np.linalg.norm(directions, axis=1, keepdims=True) + [1, 2, 3], False, None, tolerance
+    )
     assert isinstance(sphere, Sphere) and sphere.radius == pytest.approx(5.0) and np.allclose(sphere.centre, [1, 2, 3])
     # a torus is none of them: its patch keeps the facets
     u, v = rng.uniform(0, 2 * math.pi, (2, 300))
     torus = np.column_stack([(10 + 2 * np.cos(v)) * np.cos(u), (10 + 2 * np.cos(v)) * np.sin(u), 2 * np.sin(v)])
     assert fit_surface(torus, False, None, tolerance) is None
-    assert fit_surface(cylinder_vertices + rng.normal(scale=1e-3, size=cylinder_vertices.shape), False, Axis,
-                       tolerance) is None
+    assert (
+        fit_surface(cylinder_vertices + rng.normal(scale=1e-3, size=cylinder_vertices.shape), False, Axis, tolerance)
+        is None
+    )
 
 
 def test_a_circle_is_the_intersection_of_its_cylinder_and_plane():
@@ -55,8 +59,11 @@ def test_a_circle_is_the_intersection_of_its_cylinder_and_plane():
 
 def _mesh(tmp_path, geometry: dict, size: float, order: int = 2) -> meshio.Mesh:
     job = tmp_path / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": geometry, "size": size,
-                                   "output": {"directory": "out", "formats": ["msh"], "order": order}}))
+    job.write_text(
+        yaml.safe_dump(
+            {"geometry": geometry, "size": size, "output": {"directory": "out", "formats": ["msh"], "order": order}}
+        )
+    )
     assert main(["mesh", str(job), "--quiet"]) == 0
     return meshio.read(tmp_path / "out" / "mesh.msh")
 
@@ -65,9 +72,15 @@ def _group_nodes(mesh: meshio.Mesh, name: str) -> np.ndarray:
     """The nodes of the boundary faces (triangles or triangle6) of the patch named ``name`` (its physical
     group is ``name-surface`` where curves share the name)."""
     tag = mesh.field_data[name if name in mesh.field_data else f"{name}-surface"][0]
-    return np.unique(np.concatenate([block.data[tags == tag] for block, tags in
-                                     zip(mesh.cells, mesh.cell_data["gmsh:physical"])
-                                     if block.type.startswith("triangle")]))
+    return np.unique(
+        np.concatenate(
+            [
+                block.data[tags == tag]
+                for block, tags in zip(mesh.cells, mesh.cell_data["gmsh:physical"])
+                if block.type.startswith("triangle")
+            ]
+        )
+    )
 
 
 def test_the_hole_of_a_plate_is_a_circle_in_the_written_mesh(tmp_path):
@@ -97,8 +110,9 @@ def test_validate_solves_on_the_written_nodes():
     from engine.pipeline import run
     from engine.validation.elasticity import build
 
-    job = job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 20.0, "output": {"order": 2}},
-                        base_dir=".", source="<test>")
+    job = job_from_dict(
+        {"geometry": {"shape": "plate_with_hole"}, "size": 20.0, "output": {"order": 2}}, base_dir=".", source="<test>"
+    )
     result = run(job, write=False)
     points, tets10, _ = quadratic(result.mesh, result.geometry, result.features)
     model = build(result)
@@ -117,17 +131,29 @@ def test_a_faceted_cone_is_recognised_whatever_its_facets():
     u = np.cross(axis, [1.0, 0, 0])
     u /= np.linalg.norm(u)
     v = np.cross(axis, u)
-    ring = lambda t: apex + t * (math.cos(half) * axis + math.sin(half) * (np.outer(np.cos(angles), u) +
-                                                                            np.outer(np.sin(angles), v)))
+
+    def ring(t):
+        around = np.outer(np.cos(angles), u) + np.outer(np.sin(angles), v)
+        return apex + t * (math.cos(half) * axis + math.sin(half) * around)
+
     vertices = np.vstack([ring(2.0), ring(5.0)])
     n = len(angles)
-    faces = np.array([[i, (i + 1) % n, n + i] for i in range(n)] + [[(i + 1) % n, n + (i + 1) % n, n + i]
-                                                                     for i in range(n)])
+    faces = np.array(
+        [[i, (i + 1) % n, n + i] for i in range(n)] + [[(i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
+    )
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     cone = fit_surface(vertices, False, None, 1e-9, mesh.face_normals, mesh.triangles_center)
     assert isinstance(cone, Cone)
-    assert np.allclose(cone.apex, apex) and np.allclose(np.abs(cone.axis @ axis), 1) and cone.angle == pytest.approx(half)
+    assert (
+        np.allclose(cone.apex, apex) and np.allclose(np.abs(cone.axis @ axis), 1) and cone.angle == pytest.approx(half)
+    )
     # points off it go to its nappe
     probe = ring(3.0) + 0.1 * axis
-    assert np.abs(np.linalg.norm(np.cross(cone.project(probe) - apex, axis), axis=1) /
-                  np.linalg.norm(cone.project(probe) - apex, axis=1) - math.sin(half)).max() < 1e-12
+    assert (
+        np.abs(
+            np.linalg.norm(np.cross(cone.project(probe) - apex, axis), axis=1)
+            / np.linalg.norm(cone.project(probe) - apex, axis=1)
+            - math.sin(half)
+        ).max()
+        < 1e-12
+    )

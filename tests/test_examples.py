@@ -11,6 +11,7 @@ checked on:
   the target size, and for the mesh's own element sizes up to the discretisation noise the same mesh
   shows elsewhere. A test-only job with a gradation so steep that sizes jump shows the check fails.
 """
+
 from __future__ import annotations
 
 import json
@@ -43,8 +44,14 @@ PLACED = {
     "plate-hole-static": {"uniform-domain": 1, "hole": 1, "thin-wall": 1, "curvature": 1},
     "bracket-fillet-fatigue": {"uniform-domain": 1, "fillet": 1, "thin-wall": 1, "curvature": 2},
     "cracked-plate-fracture": {"uniform-domain": 1, "crack-front": 1, "thin-wall": 1},
-    "bearing-block-stl": {"uniform-domain": 1, "hole": 3, "re-entrant-edge": 1, "thin-wall": 2, "narrow-gap": 1,
-                          "curvature": 3},
+    "bearing-block-stl": {
+        "uniform-domain": 1,
+        "hole": 3,
+        "re-entrant-edge": 1,
+        "thin-wall": 2,
+        "narrow-gap": 1,
+        "curvature": 3,
+    },
 }
 
 # Tolerances of the mesh-size jump check, in natural-log units of the element size (see size_jumps):
@@ -56,8 +63,11 @@ PLACED = {
 # placed but outranked everywhere: on the bearing block the root circle of the boss lies 10 mm from the
 # bore, inside the bore's 'hole' pattern (mu 1), which beats 're-entrant-edge' (mu 0.8): the paper's rule;
 # the curvature rule (2 pi r / 24) ties and loses wherever the recipes' hole and fillet patterns ask less
-OUTRANKED = {"bearing-block-stl": {"re-entrant-edge", "curvature"}, "plate-hole-static": {"curvature"},
-             "bracket-fillet-fatigue": {"curvature"}}
+OUTRANKED = {
+    "bearing-block-stl": {"re-entrant-edge", "curvature"},
+    "plate-hole-static": {"curvature"},
+    "bracket-fillet-fatigue": {"curvature"},
+}
 
 MEDIAN_MARGIN = 0.05
 P90_MARGIN = 0.10
@@ -67,11 +77,13 @@ MIN_BOUNDARY_PAIRS = 100
 @pytest.fixture(scope="session")
 def example_output(tmp_path_factory):
     """name -> output folder of ``fuzzymesh mesh examples/NAME.yaml --out FOLDER`` (meshed once)."""
+
     @lru_cache(maxsize=None)
     def get(name: str, job: Path | None = None) -> Path:
         out = tmp_path_factory.mktemp(name) / "out"
         assert main(["mesh", str(job or EXAMPLES / f"{name}.yaml"), "--out", str(out), "--quiet"]) == 0
         return out
+
     return get
 
 
@@ -88,6 +100,7 @@ def solid_volume(name: str) -> float:
     job = yaml.safe_load((EXAMPLES / f"{name}.yaml").read_text())
     if "file" in job["geometry"]:
         import trimesh
+
         return float(trimesh.load(EXAMPLES / job["geometry"]["file"]).volume)
     kind = job["geometry"]["shape"]
     return build_shape(kind, validate(job["geometry"].get("parameters", {}), SHAPES[kind][1])).geometry.volume
@@ -95,8 +108,9 @@ def solid_volume(name: str) -> float:
 
 def face_neighbours(tets: np.ndarray) -> np.ndarray:
     """(k, 2) pairs of elements that share a face."""
-    faces = np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]], tets[:, [0, 1, 2]]]),
-                    axis=1)
+    faces = np.sort(
+        np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 2, 3]], tets[:, [0, 1, 3]], tets[:, [0, 1, 2]]]), axis=1
+    )
     owner = np.tile(np.arange(len(tets)), 4)
     order = np.lexsort(faces.T[::-1])
     faces, owner = faces[order], owner[order]
@@ -154,16 +168,20 @@ def test_example_meshes_and_places_its_patterns(example_output, name):
         placed[pattern["pattern"]] = placed.get(pattern["pattern"], 0) + 1
     assert placed == PLACED[name]
     base = [p["index"] for p in legend["patterns"] if p["pattern"] == "uniform-domain"]
-    local = [p["index"] for p in legend["patterns"]
-             if p["pattern"] != "uniform-domain" and p["pattern"] not in OUTRANKED.get(name, ())]
+    local = [
+        p["index"]
+        for p in legend["patterns"]
+        if p["pattern"] != "uniform-domain" and p["pattern"] not in OUTRANKED.get(name, ())
+    ]
     wins = np.bincount(cells["winner"][cells["winner"] >= 0], minlength=len(legend["patterns"]))
     assert all(wins[k] > 0 for k in local), "every local pattern sizes some elements"
     if not local:
         assert wins[base[0]] == len(tets)
 
 
-def ligament_and_far_side(centroids, offset: float, radius: float = 25.0, thickness: float = 20.0,
-                          reach: float = 15.0, band: float = 10.0):
+def ligament_and_far_side(
+    centroids, offset: float, radius: float = 25.0, thickness: float = 20.0, reach: float = 15.0, band: float = 10.0
+):
     """Plate elements within ``reach`` of the junction along +x (towards the near edge) and along -x."""
     in_plate = (centroids[:, 2] < thickness) & (np.abs(centroids[:, 1]) < band)
     x = centroids[:, 0] - offset
@@ -198,8 +216,9 @@ def test_no_size_jump_across_pattern_boundaries(example_output, name):
 def test_the_jump_check_fails_on_a_field_that_jumps(example_output, tmp_path):
     """Fig. 9 with a test-only gradation g = 3.0 (h may grow by 2 per unit length: 5.2 to 11.5 within
     3.2 mm, less than one element) against the shipped limit g = 1.3: both checks fail."""
-    (tmp_path / "steep.yaml").write_text("kind: sizing\ndoc: test only, sizes jump\ngradation: 3.0\n"
-                                         "base_pattern: uniform-domain\n")
+    (tmp_path / "steep.yaml").write_text(
+        "kind: sizing\ndoc: test only, sizes jump\ngradation: 3.0\nbase_pattern: uniform-domain\n"
+    )
     job = yaml.safe_load((EXAMPLES / "connected-uniform-nonuniform.yaml").read_text())
     job["knowledge"] = ["steep.yaml"]
     (tmp_path / "job.yaml").write_text(yaml.safe_dump(job))

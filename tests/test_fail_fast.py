@@ -1,4 +1,5 @@
 """Refusals that depend only on the geometry and the rules come before packing, within seconds (issue 14)."""
+
 from __future__ import annotations
 
 import math
@@ -48,15 +49,16 @@ def holed_block(tmp_path_factory):
         if started:
             gmsh.finalize()
     surface = trimesh.load(path, force="mesh")
-    trimesh.repair.fix_normals(surface)     # Gmsh writes a reversed face's triangles as they are
+    trimesh.repair.fix_normals(surface)  # Gmsh writes a reversed face's triangles as they are
     surface.export(path)
     return path
 
 
 def _job(folder, recipe="static-stress"):
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"file": "block.stl"}, "recipe": recipe,
-                                   "output": {"directory": "out"}}))
+    job.write_text(
+        yaml.safe_dump({"geometry": {"file": "block.stl"}, "recipe": recipe, "output": {"directory": "out"}})
+    )
     return load_job(job)
 
 
@@ -65,8 +67,8 @@ def test_holes_bind_in_well_under_a_second(holed_block):
     kb = load_knowledge(job.knowledge)
     geometry, features = build_geometry(job)
     classify(features, kb.feature_kinds)
-    local_size(geometry), curvature(geometry, features.feature_angle)   # the always-placed rules' surface
-    start = time.perf_counter()                                         # measures, once per solid (0.5 s)
+    local_size(geometry), curvature(geometry, features.feature_angle)  # the always-placed rules' surface
+    start = time.perf_counter()  # measures, once per solid (0.5 s)
     placed = bind(kb, job_placements(job, kb), features, geometry, geometry.scale / 40)
     seconds = time.perf_counter() - start
     assert sum(p.pattern == "hole" for p in placed) == HOLES

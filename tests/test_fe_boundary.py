@@ -1,6 +1,7 @@
 """Boundary groups are the tets' own faces: in .msh (triangle / triangle6 physical groups) and Abaqus .inp
 (element-face surfaces) every boundary face is a face of exactly one tetrahedron, outward, with that tet's
 mid-nodes, and together they cover the boundary. .vtu and .med hold no faces."""
+
 from __future__ import annotations
 
 import functools
@@ -11,8 +12,8 @@ import meshio
 import numpy as np
 import pytest
 
-from engine.fe import SIDE_NODES, TET10_EDGES, tet_boundary
 from engine.atomic import write_all_or_nothing
+from engine.fe import SIDE_NODES, TET10_EDGES, tet_boundary
 from engine.io import FEModel, mesh_targets
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
@@ -24,8 +25,8 @@ from engine.validation import plate_hole
 
 # per side of a tet (face k opposite corner k, outward), its corners and its edges' mid-nodes in VTK order
 SIDES = np.array([[1, 2, 3, 5, 9, 8], [0, 3, 2, 7, 9, 6], [0, 1, 3, 4, 8, 7], [0, 2, 1, 6, 5, 4]])
-ROTATIONS = np.array([[0, 1, 2, 3, 4, 5], [1, 2, 0, 4, 5, 3], [2, 0, 1, 5, 3, 4]])   # of a triangle6
-ABAQUS_SIDE = {"S1": 3, "S2": 2, "S3": 0, "S4": 1}      # Abaqus face label -> side index (opposite corner)
+ROTATIONS = np.array([[0, 1, 2, 3, 4, 5], [1, 2, 0, 4, 5, 3], [2, 0, 1, 5, 3, 4]])  # of a triangle6
+ABAQUS_SIDE = {"S1": 3, "S2": 2, "S3": 0, "S4": 1}  # Abaqus face label -> side index (opposite corner)
 _spec = importlib.util.spec_from_file_location("make_parts", Path(__file__).parent / "parts" / "make_parts.py")
 make_parts = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(make_parts)
@@ -36,8 +37,13 @@ def plate(scale: float) -> dict:
     return plate_hole.job(scale, graded=False, rules=False)
 
 
-CASES = {"plate-1": plate(1.0), "plate-2": plate(2.0), "plate-0.7": plate(0.7),
-         "l_bracket": {"geometry": {"shape": "l_bracket"}}, "cone_pin": None}
+CASES = {
+    "plate-1": plate(1.0),
+    "plate-2": plate(2.0),
+    "plate-0.7": plate(0.7),
+    "l_bracket": {"geometry": {"shape": "l_bracket"}},
+    "cone_pin": None,
+}
 
 
 @functools.lru_cache(maxsize=None)
@@ -105,8 +111,11 @@ def test_every_boundary_face_in_every_format_is_a_face_of_a_tet(root, case, orde
     assert_tet_faces(np.unique(faces, axis=0), msh.cells_dict[kind], f"{case} .msh")
     inp = meshio.read(folder / "mesh.inp")
     tets = inp.cells_dict[kind]
-    named = [(np.concatenate([np.asarray(x, int) for x in cells]), ABAQUS_SIDE[name[-2:]])
-             for name, cells in inp.cell_sets.items() if name.startswith("_") and name[-2:] in ABAQUS_SIDE]
+    named = [
+        (np.concatenate([np.asarray(x, int) for x in cells]), ABAQUS_SIDE[name[-2:]])
+        for name, cells in inp.cell_sets.items()
+        if name.startswith("_") and name[-2:] in ABAQUS_SIDE
+    ]
     sides = np.vstack([tets[elements][:, SIDES[side, :3]] for elements, side in named])
     assert_tet_faces(np.unique(sides, axis=0), tets[:, :4], f"{case} .inp")
     for name in ("mesh.vtu", "mesh.med"):
@@ -121,7 +130,7 @@ def test_a_quad_split_along_the_other_diagonal_takes_the_patch_of_the_mesher_tri
     assert (TetMesh(corners, tets, None, None).volumes() > 0).all()
     faces = TetMesh(corners, tets, None, None).boundary_faces()
     top = corners[faces][:, :, 2].min(axis=1) == 1
-    declared = np.vstack([faces[~top], [[4, 5, 6], [5, 7, 6]]])   # the top split along 5-6, the tets along 4-7
+    declared = np.vstack([faces[~top], [[4, 5, 6], [5, 7, 6]]])  # the top split along 5-6, the tets along 4-7
     patch = np.r_[np.zeros((~top).sum(), int), 1, 1]
     mesh = TetMesh(corners, tets, np.zeros(8, np.int8), np.zeros(8, np.int64), boundary=declared, boundary_patch=patch)
     owner, side, found = tet_boundary(mesh)

@@ -1,5 +1,6 @@
 """FE-ready files: physical groups in .msh (read by Gmsh itself), node sets and element-face surfaces in
 Abaqus .inp, quadratic tetrahedra above the scaled-Jacobian floor and boundary nodes on the surface."""
+
 from __future__ import annotations
 
 import functools
@@ -9,15 +10,15 @@ import meshio
 import numpy as np
 import pytest
 import yaml
+from test_meshers import meshed, packed
 
 from engine.cli import main
 from engine.exact import CylinderSurface, curve_surfaces, exact_surfaces
 from engine.fe import TET10_EDGES, curve_edges, feature_groups, quadratic, row_index, tet_boundary
 from engine.io import ABAQUS_FACE
 from engine.levels import NODE_LEVELS
-from engine.shapes import CHORDAL_ERROR
 from engine.quadratic import QUADRATIC_FLOOR, _gradients, scaled_jacobian
-from test_meshers import meshed, packed
+from engine.shapes import CHORDAL_ERROR
 
 
 @functools.lru_cache(maxsize=None)
@@ -25,8 +26,15 @@ def written(tmp_root, order):
     folder = tmp_root / f"order{order}"
     folder.mkdir()
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0,
-                                   "output": {"formats": ["vtu", "msh", "inp", "bdf", "med"], "order": order}}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"shape": "plate_cylinder_junction"},
+                "size": 12.0,
+                "output": {"formats": ["vtu", "msh", "inp", "bdf", "med"], "order": order},
+            }
+        )
+    )
     assert main(["mesh", str(job), "--quiet"]) == 0
     return folder / "out"
 
@@ -86,8 +94,13 @@ def test_quadratic_tets_are_above_the_floor_and_curved_on_the_boundary():
     surfaces = exact_surfaces(geometry, features)
     assert all(s is not None for s in surfaces), "the junction's patches are planes and a cylinder"
     patch = tet_boundary(mesh)[2]
-    off = np.concatenate([np.linalg.norm(surfaces[p].project(points[m]) - points[m], axis=1)
-                          for p in np.unique(patch) for m in [np.unique(triangles6[patch == p, 3:])]])
+    off = np.concatenate(
+        [
+            np.linalg.norm(surfaces[p].project(points[m]) - points[m], axis=1)
+            for p in np.unique(patch)
+            for m in [np.unique(triangles6[patch == p, 3:])]
+        ]
+    )
     assert np.mean(off < 1e-9 * geometry.scale) > 0.99, "boundary mid-edge nodes on the exact surfaces"
     _, distance, _ = geometry.closest_point(points[np.unique(triangles6[:, 3:])])
     radius = max(s.radius for s in surfaces if isinstance(s, CylinderSurface))
@@ -133,8 +146,16 @@ def test_mid_edge_nodes_on_flat_faces_stay_at_the_midpoint():
     from engine.job import job_from_dict
     from engine.pipeline import run
 
-    job = job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 16.79, "place": [
-        {"pattern": "uniform-domain"}, {"pattern": "hole", "every": "hole", "parameters": {"near": 0.375, "far": 3.0}}]})
+    job = job_from_dict(
+        {
+            "geometry": {"shape": "plate_with_hole"},
+            "size": 16.79,
+            "place": [
+                {"pattern": "uniform-domain"},
+                {"pattern": "hole", "every": "hole", "parameters": {"near": 0.375, "far": 3.0}},
+            ],
+        }
+    )
     result = run(job, write=False)
     mesh, features = result.mesh, result.features
     chords, curve = curve_edges(mesh, features)
@@ -161,9 +182,9 @@ def test_limit_curving_keeps_each_element_above_the_floor_curving_as_far_as_it_c
     straight = np.vstack([corners, corners[TET10_EDGES].mean(axis=1)])
     tets10 = np.arange(10)[None]
     far, near, medium = straight.copy(), straight.copy(), straight.copy()
-    far[4] += [0.0, 0.0, 2.0 ** (BISECTION_STEPS + 3)]     # edge 0-1's mid-node far above the opposite corner
+    far[4] += [0.0, 0.0, 2.0 ** (BISECTION_STEPS + 3)]  # edge 0-1's mid-node far above the opposite corner
     near[4] += [0.0, -0.05, 0.0]
-    medium[4] += [0.0, 0.3, 0.0]                          # towards corner 2: scaled Jacobian 1 - 4 x 0.3
+    medium[4] += [0.0, 0.3, 0.0]  # towards corner 2: scaled Jacobian 1 - 4 x 0.3
     assert scaled_jacobian(near, tets10)[0] >= QUADRATIC_FLOOR > scaled_jacobian(medium, tets10)[0]
     assert np.array_equal(limit_curving(straight, far, tets10), straight)
     assert np.array_equal(limit_curving(straight, near, tets10), near)
@@ -183,7 +204,7 @@ def test_scaled_jacobian_bounds_det_j_from_below():
     grid = np.linspace(0, 1, 13)
     r, s, t = (a.ravel() for a in np.meshgrid(grid, grid, grid, indexing="ij"))
     inside = r + s + t <= 1 + 1e-12
-    gradients = np.array([_gradients(*p) for p in zip(r[inside], s[inside], t[inside])])   # (p, 10, 3)
+    gradients = np.array([_gradients(*p) for p in zip(r[inside], s[inside], t[inside])])  # (p, 10, 3)
     rng = np.random.default_rng(0)
     tight = 0
     for _ in range(50):
@@ -195,7 +216,7 @@ def test_scaled_jacobian_bounds_det_j_from_below():
         tight += np.isclose(bound, sampled)
     assert tight > 10, "the bound is the corner value where the minimum is at a corner"
     folded = straight.copy()
-    folded[4] += [0.2, 0.6, 0.6]   # edge 0-1's mid-node beyond the opposite face
+    folded[4] += [0.2, 0.6, 0.6]  # edge 0-1's mid-node beyond the opposite face
     assert scaled_jacobian(folded, tets10)[0] < 0
 
 
@@ -208,7 +229,11 @@ def test_closed_curves_parametrise_across_their_seam():
     circle = Curve("c", np.column_stack([10 * np.cos(angles), 10 * np.sin(angles), 0 * angles]), True, None)
     seam, before, after = circle.points[0], circle.point_at(circle.length - 0.1), circle.point_at(0.1)
     s = circle.parameter(np.vstack([seam, before, after]))
-    assert s[0] == pytest.approx(0.0, abs=1e-9) and s[1] == pytest.approx(circle.length - 0.1) and s[2] == pytest.approx(0.1)
+    assert (
+        s[0] == pytest.approx(0.0, abs=1e-9)
+        and s[1] == pytest.approx(circle.length - 0.1)
+        and s[2] == pytest.approx(0.1)
+    )
 
 
 def test_hole_rim_mid_nodes_sit_in_the_middle_of_their_arcs():
@@ -217,8 +242,14 @@ def test_hole_rim_mid_nodes_sit_in_the_middle_of_their_arcs():
     from engine.job import job_from_dict
     from engine.pipeline import run
 
-    result = run(job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 12.0, "output": {"order": 2}},
-                               base_dir=".", source="<test>"), write=False)
+    result = run(
+        job_from_dict(
+            {"geometry": {"shape": "plate_with_hole"}, "size": 12.0, "output": {"order": 2}},
+            base_dir=".",
+            source="<test>",
+        ),
+        write=False,
+    )
     mesh, features = result.mesh, result.features
     points, tets10, triangles6 = quadratic(mesh, result.geometry, features)
     chords, curve = curve_edges(mesh, features, triangles6[:, :3])
@@ -233,7 +264,7 @@ def test_hole_rim_mid_nodes_sit_in_the_middle_of_their_arcs():
         s = rim.parameter(points[ends.ravel()]).reshape(-1, 2)
         m = rim.parameter(points[[middle[tuple(sorted(e))] for e in ends.tolist()]])
         span = np.mod(s[:, 1] - s[:, 0], rim.length)
-        span = np.where(span > rim.length / 2, span - rim.length, span)        # signed, the short way round
+        span = np.where(span > rim.length / 2, span - rim.length, span)  # signed, the short way round
         offset = np.mod(m - s[:, 0] + rim.length / 2, rim.length) - rim.length / 2
         assert np.allclose(offset / span, 0.5, atol=0.05), rim.id
         checked += len(ends)

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
+from conftest import shape_and_features
 
 from engine.features import detect_features
-from conftest import shape_and_features
 
 
 def test_plate_has_the_corners_edges_and_faces_of_a_box():
@@ -32,8 +32,10 @@ def test_circular_curves_carry_centre_axis_and_radius():
     assert z == pytest.approx([0, 100])
 
 
-@pytest.mark.parametrize("kind,name,radius", [("cylinder", "top-edge", 25), ("plate_with_hole", "hole", 10),
-                                              ("plate_cylinder_junction", "junction", 25)])
+@pytest.mark.parametrize(
+    "kind,name,radius",
+    [("cylinder", "top-edge", 25), ("plate_with_hole", "hole", 10), ("plate_cylinder_junction", "junction", 25)],
+)
 def test_faceting_chordal_error_is_at_most_a_thousandth_of_the_radius(kind, name, radius):
     _, features = shape_and_features(kind)
     curve = next(c for c in features.named(name) if hasattr(c, "closed"))

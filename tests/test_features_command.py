@@ -1,5 +1,6 @@
 """`fuzzymesh features FILE_OR_JOB`: every corner, curve and patch with its kinds, size and place; JSON with
 --json; one error line and exit code 2 on a broken file; `describe` names a feature by id and centroid."""
+
 from __future__ import annotations
 
 import json
@@ -27,8 +28,9 @@ def columns(line: str) -> list[str]:
 @pytest.fixture
 def plate_job(tmp_path):
     job = tmp_path / "plate.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate_with_hole", "parameters": {"hole_radius": 12,
-                                                                                          "hole_x": 20}}}))
+    job.write_text(
+        yaml.safe_dump({"geometry": {"shape": "plate_with_hole", "parameters": {"hole_radius": 12, "hole_x": 20}}})
+    )
     return job
 
 
@@ -40,11 +42,16 @@ def test_the_hole_of_a_built_in_plate_is_listed_with_its_radius_and_centroid(cap
     header = lines[1].split()
     assert header[:4] == ["id", "names", "kinds", "size"]
     (hole,) = [cells for cells in map(columns, lines[2:]) if cells[2] == "hole"]
-    assert hole[0].startswith("patch-") and hole[1:] == ["hole", "hole", "A 753.7, r 12", "20, 0, 5",
-                                                         "[8, -12, 0] .. [32, 12, 10]"]
+    assert hole[0].startswith("patch-") and hole[1:] == [
+        "hole",
+        "hole",
+        "A 753.7, r 12",
+        "20, 0, 5",
+        "[8, -12, 0] .. [32, 12, 10]",
+    ]
     # the columns line up: every row's centroid starts where the header's does
     column = lines[1].index("centroid")
-    assert all(line[column - 2:column] == "  " for line in lines[2:])
+    assert all(line[column - 2 : column] == "  " for line in lines[2:])
 
 
 def test_json_parses_and_holds_the_same_features(capsys, plate_job):

@@ -1,4 +1,5 @@
 """The vectorised Mamdani engine against scikit-fuzzy's reference control system."""
+
 import numpy as np
 import pytest
 import skfuzzy
@@ -12,10 +13,16 @@ def three_label_base():
     def variable(name, lo, hi, points, default=None):
         return Variable(name, (lo, hi), {label: Term(label, p) for label, p in points.items()}, default)
 
-    p = variable("p", 1.0, 2.0, {"SMALL": (1, 1, 1.05, 1.15), "MEDIUM": (1.05, 1.15, 1.25, 1.4),
-                                 "LARGE": (1.25, 1.4, 2, 2)})
-    q = variable("q", 0.0, 1.0, {"SMALL": (0, 0, 0.1, 0.3), "MEDIUM": (0.1, 0.3, 0.5, 0.7),
-                                 "LARGE": (0.5, 0.7, 1, 1)}, default=0.0)
+    p = variable(
+        "p", 1.0, 2.0, {"SMALL": (1, 1, 1.05, 1.15), "MEDIUM": (1.05, 1.15, 1.25, 1.4), "LARGE": (1.25, 1.4, 2, 2)}
+    )
+    q = variable(
+        "q",
+        0.0,
+        1.0,
+        {"SMALL": (0, 0, 0.1, 0.3), "MEDIUM": (0.1, 0.3, 0.5, 0.7), "LARGE": (0.5, 0.7, 1, 1)},
+        default=0.0,
+    )
     rules = [Rule(f"r-{t}", (("p", t),), (("q", t),)) for t in ("SMALL", "MEDIUM", "LARGE")]
     return RuleBase("test", {"p": p}, {"q": q}, rules, resolution=1001)
 
@@ -26,8 +33,9 @@ def reference(base, values):
     for antecedent, var in ((p, base.inputs["p"]), (q, base.outputs["q"])):
         for label, term in var.terms.items():
             antecedent[label] = skfuzzy.trapmf(antecedent.universe, np.array(term.points))
-    system = control.ControlSystemSimulation(control.ControlSystem(
-        [control.Rule(p[t], q[t]) for t in ("SMALL", "MEDIUM", "LARGE")]))
+    system = control.ControlSystemSimulation(
+        control.ControlSystem([control.Rule(p[t], q[t]) for t in ("SMALL", "MEDIUM", "LARGE")])
+    )
     out = []
     for v in values:
         system.input["p"] = v
@@ -61,9 +69,15 @@ def test_and_takes_the_minimum_of_the_clauses():
     a = Variable("a", (0, 1), {"LO": lo, "HI": hi})
     b = Variable("b", (0, 1), {"LO": lo, "HI": hi})
     out = Variable("o", (0, 1), {"LO": lo, "HI": hi}, default=0.5)
-    base = RuleBase("and", {"a": a, "b": b}, {"o": out},
-                    [Rule("both-high", (("a", "HI"), ("b", "HI")), (("o", "HI"),)),
-                     Rule("any-low", (("a", "LO"),), (("o", "LO"),))])
+    base = RuleBase(
+        "and",
+        {"a": a, "b": b},
+        {"o": out},
+        [
+            Rule("both-high", (("a", "HI"), ("b", "HI")), (("o", "HI"),)),
+            Rule("any-low", (("a", "LO"),), (("o", "LO"),)),
+        ],
+    )
     _, firing = base.evaluate({"a": np.array([0.9, 0.6]), "b": np.array([0.5, 1.0])})
     assert firing[:, 0] == pytest.approx([0.25, 0.5])
 

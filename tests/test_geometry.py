@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 import trimesh
+from conftest import shape_and_features
 
 from engine.geometry import load_surface, validate_surface
-from conftest import shape_and_features
 
 
 def test_inside_test_agrees_with_exact_signed_distance():

@@ -1,6 +1,7 @@
 """What lint finds without a solid, and what mesh finds the same way before any work (issue 16, item 4):
 patterns evaluated at sample L and H, names shadowing the shipped ones unless a file says it overrides them,
 every file's first error from a folder, recipes included. The one-file cases are in tests/broken/."""
+
 from __future__ import annotations
 
 import shutil
@@ -46,10 +47,10 @@ def _copy(name: str, folder: Path) -> Path:
 def test_lint_of_a_folder_gives_every_files_first_error_recipes_included(tmp_path, capsys):
     folder = tmp_path / "kb"
     folder.mkdir()
-    broken = [_copy(name, folder) for name in ("patterns/value-divide-by-zero.yaml",
-                                                "recipes/unknown-pattern.yaml")]
+    broken = [_copy(name, folder) for name in ("patterns/value-divide-by-zero.yaml", "recipes/unknown-pattern.yaml")]
     (folder / "z-recipe.yaml").write_text(
-        (BROKEN / "recipes/placed-parameter-extent-zero.yaml").read_text().replace("broken-static", "other"))
+        (BROKEN / "recipes/placed-parameter-extent-zero.yaml").read_text().replace("broken-static", "other")
+    )
     (folder / "fine.yaml").write_text(PATTERN.format(name="fine-hole", near="near * L"))
     code, out, err = _run(["lint", folder], capsys)
     assert code == 1 and err == [], out + err
@@ -63,8 +64,11 @@ def test_lint_of_a_folder_gives_every_files_first_error_recipes_included(tmp_pat
 
 def test_a_file_that_says_it_overrides_a_shipped_pattern_replaces_it(tmp_path, capsys):
     mine = tmp_path / "my-hole.yaml"
-    mine.write_text(PATTERN.format(name="hole", near="near * L").replace("name: hole", "name: hole\noverrides: true")
-                    .replace("small elements at a hole wall", "my own hole pattern"))
+    mine.write_text(
+        PATTERN.format(name="hole", near="near * L")
+        .replace("name: hole", "name: hole\noverrides: true")
+        .replace("small elements at a hole wall", "my own hole pattern")
+    )
     code, out, err = _run(["lint", mine], capsys)
     assert (code, out, err) == (0, [f"ok: {mine}"], [])
     code, out, err = _run(["patterns", "--knowledge", mine, "show", "hole"], capsys)
@@ -75,8 +79,11 @@ def test_a_file_that_says_it_overrides_a_shipped_pattern_replaces_it(tmp_path, c
 
 def test_a_copy_of_the_population_rules_that_says_it_overrides_them_replaces_them(tmp_path, capsys):
     copy = tmp_path / "population.yaml"
-    copy.write_text((SHIPPED / "knowledge" / "population.yaml").read_text().replace("kind: rules",
-                                                                                   "kind: rules\noverrides: true", 1))
+    copy.write_text(
+        (SHIPPED / "knowledge" / "population.yaml")
+        .read_text()
+        .replace("kind: rules", "kind: rules\noverrides: true", 1)
+    )
     code, out, err = _run(["lint", copy], capsys)
     assert (code, err) == (0, []) and out == [f"ok: {copy}"]
     kb = load_knowledge([copy])
@@ -101,13 +108,15 @@ def test_a_binding_error_names_the_placement_and_the_patterns_own_line(tmp_path,
     pattern = tmp_path / "odd.yaml"
     pattern.write_text(PATTERN.format(name="odd-hole", near='"0.01 * L * (L - 5) * (L - 9)"'))
     job = tmp_path / "job.yaml"
-    job.write_text("geometry: {shape: plate_with_hole, parameters: {hole_radius: 7}}\n"
-                   "size: 10\n"
-                   "knowledge: [odd.yaml]\n"
-                   "place:\n"
-                   "  - pattern: uniform-domain\n"
-                   "  - pattern: odd-hole\n"
-                   "    every: hole\n")
+    job.write_text(
+        "geometry: {shape: plate_with_hole, parameters: {hole_radius: 7}}\n"
+        "size: 10\n"
+        "knowledge: [odd.yaml]\n"
+        "place:\n"
+        "  - pattern: uniform-domain\n"
+        "  - pattern: odd-hole\n"
+        "    every: hole\n"
+    )
     code, out, err = _run(["mesh", job, "--quiet", "--out", tmp_path / "out"], capsys)
     assert code == 2 and len(err) == 1, out + err
     line = err[0]

@@ -21,6 +21,7 @@ entry is removed.
 The rest checks ``lint`` on folders and on the shipped knowledge base, and the
 ``patterns`` / ``recipes`` commands.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -47,6 +48,7 @@ KNOWN_BUGS: dict[str, str] = {}
 
 
 # --------------------------------------------------------------------------- helpers
+
 
 def _corpus() -> list[Path]:
     return sorted(BROKEN.rglob("*.yaml"))
@@ -128,6 +130,7 @@ def _words(text: str) -> str:
 
 # --------------------------------------------------------------------------- the corpus itself
 
+
 def test_corpus_is_large_enough_and_well_formed():
     files = _corpus()
     assert len(files) >= MIN_CORPUS, f"only {len(files)} broken files"
@@ -154,14 +157,15 @@ def test_lint_names_the_defect_in_one_line(path, capsys):
 @pytest.mark.parametrize("path", _cases(jobs=True))
 def test_job_fails_validation_in_one_line(path, capsys, tmp_path, monkeypatch):
     line_no, fragment = _expectation(path)
-    monkeypatch.setattr("engine.pipeline.get_packer", lambda name: _no_meshing)   # looked up early, called late
+    monkeypatch.setattr("engine.pipeline.get_packer", lambda name: _no_meshing)  # looked up early, called late
     out_dir = tmp_path / "out"
     code, out, err = _run(["mesh", str(path), "--quiet", "--out", str(out_dir)], capsys)
     text = "\n".join(out + err)
     assert "Traceback" not in text and "internal error" not in text, text
     assert len(err) == 1, f"expected one stderr line, got {len(err)}:\n{text}"
-    assert err[0].startswith(f"fuzzymesh: error: {path}:{line_no}:"), \
+    assert err[0].startswith(f"fuzzymesh: error: {path}:{line_no}:"), (
         f"expected 'fuzzymesh: error: {path}:{line_no}:...', got: {err[0]}"
+    )
     assert fragment in err[0], f"expected {fragment!r} in: {err[0]}"
     assert code == 2, f"exit code {code}: {text}"
     assert not out_dir.exists() or not any(out_dir.iterdir()), "a failed job wrote files"
@@ -186,15 +190,21 @@ def test_on_off_labels_are_not_turned_into_contradictory_messages(tmp_path, caps
         "kind: rules\nid: switch\nrulebases:\n  s:\n    inputs:\n      x:\n        universe: [0, 1]\n"
         "        terms: {OFF: [0, 0, 0.4, 0.6], ON: [0.4, 0.6, 1, 1]}\n    outputs:\n      q:\n"
         "        universe: [0, 1]\n        default: 0\n        terms: {LOW: [0, 0, 0.5], HIGH: [0.5, 1, 1]}\n"
-        "    rules:\n      - {id: a, if: {x: OFF}, then: {q: LOW}}\n      - {id: b, if: {x: ON}, then: {q: HIGH}}\n")
+        "    rules:\n      - {id: a, if: {x: OFF}, then: {q: LOW}}\n      - {id: b, if: {x: ON}, then: {q: HIGH}}\n"
+    )
     code, out, err = _run(["lint", str(path)], capsys)
     # either the labels are names (ok), or the one error line says what to do about them
-    assert (code == 0 and out[0].startswith("ok")) or \
-        (code == 1 and len(out + err) == 1 and out[0].startswith(f"{path}:")
-         and "ON" in out[0][len(str(path)):] and "defined labels: False, True" not in out[0])
+    assert (code == 0 and out[0].startswith("ok")) or (
+        code == 1
+        and len(out + err) == 1
+        and out[0].startswith(f"{path}:")
+        and "ON" in out[0][len(str(path)) :]
+        and "defined labels: False, True" not in out[0]
+    )
 
 
 # --------------------------------------------------------------------------- lint on folders
+
 
 def test_lint_without_arguments_checks_the_shipped_knowledge_base(capsys):
     code, out, err = _run(["lint"], capsys)
@@ -254,6 +264,7 @@ def test_a_shipped_pattern_redefined_by_extra_knowledge_names_the_extra_file(tmp
 
 # --------------------------------------------------------------------------- patterns and recipes commands
 
+
 def test_patterns_list_names_every_shipped_pattern(capsys):
     code, out, err = _run(["patterns", "list"], capsys)
     assert code == 0 and err == [], err
@@ -291,7 +302,7 @@ def test_recipes_show_junction_edge_prints_its_doc_and_placements(capsys):
     text = "\n".join(out)
     assert out[0].startswith("recipe junction-edge"), out[0]
     assert _words(spec["doc"]) in _words(text)
-    places = out[out.index("places:") + 1:]
+    places = out[out.index("places:") + 1 :]
     assert len(places) == len(spec["place"]), places
     for line, placement in zip(places, spec["place"]):
         assert line.split()[0] == placement["pattern"], line

@@ -1,6 +1,7 @@
 """Packers and meshers: the contract every registered packer and mesher keeps (plug-ins included), and the
 default mesher's acceptance on the issue's solids (closed conforming boundary, volume, Hausdorff distance,
 element quality)."""
+
 from __future__ import annotations
 
 import functools
@@ -19,15 +20,17 @@ from engine.packing import CORNER, CURVE, EVENT, LEVELS, PATCH, VOLUME, get_pack
 from engine.pipeline import prepare
 from engine.quality import surface_deviation, tet_quality
 
-CASES = {   # the issue's solids: junction at the centre and near the edge, each at a default and a fine size
+CASES = {  # the issue's solids: junction at the centre and near the edge, each at a default and a fine size
     "cylinder": {"geometry": {"shape": "cylinder"}},
     "plate_with_hole": {"geometry": {"shape": "plate_with_hole"}, "recipe": "static-stress"},
     "l_bracket": {"geometry": {"shape": "l_bracket"}, "recipe": "fatigue-fillet"},
-    "junction-centre": {"geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": 0}},
-                        "recipe": "junction-edge"},
+    "junction-centre": {
+        "geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": 0}},
+        "recipe": "junction-edge",
+    },
     "junction-edge": {"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge"},
 }
-FINE = 0.75   # the fine size, x the default global size
+FINE = 0.75  # the fine size, x the default global size
 
 
 @functools.lru_cache(maxsize=None)
@@ -73,8 +76,10 @@ def check_packer_contract(packer: str, case: str = "l_bracket") -> None:
         for k in np.unique(packing.entity[on]):
             points = packing.points[on & (packing.entity == k)]
             if level == CURVE:
-                assert np.linalg.norm(entities[k].point_at(entities[k].parameter(points)) - points,
-                                      axis=1).max() < tolerance, f"nodes on curve {k}"
+                assert (
+                    np.linalg.norm(entities[k].point_at(entities[k].parameter(points)) - points, axis=1).max()
+                    < tolerance
+                ), f"nodes on curve {k}"
             else:
                 faces = geometry.mesh.faces[entities[k].faces].astype(np.int64)
                 squared, _, _ = igl.point_mesh_squared_distance(points, np.asarray(geometry.mesh.vertices), faces)
@@ -85,8 +90,7 @@ def check_packer_contract(packer: str, case: str = "l_bracket") -> None:
     assert packing.ids is None or len(np.unique(packing.ids)) == n
     assert packing.events.dtype == EVENT
     again = get_packer(packer)(geometry, features, sizing, seed=0, knowledge=kb)
-    assert np.array_equal(again.points, packing.points) and np.array_equal(again.level, packing.level), \
-        "deterministic"
+    assert np.array_equal(again.points, packing.points) and np.array_equal(again.level, packing.level), "deterministic"
 
 
 @pytest.mark.parametrize("packer", packer_names())
@@ -113,7 +117,7 @@ def test_mesher_contract(mesher):
         if curve.sharp:
             closest = curve.point_at(curve.parameter(on))
             assert np.linalg.norm(closest - on, axis=1).max() < 1e-9 * geometry.scale, "curve nodes on their curve"
-        else:   # a smooth cut is no feature: its nodes may slide on the surface
+        else:  # a smooth cut is no feature: its nodes may slide on the surface
             assert np.abs(geometry.signed_distance(on)).max() < 1e-9 * geometry.scale, "cut nodes on the surface"
     assert "seconds" in mesh.stats
     again = get_mesher(mesher)(packing, geometry, features, seed=0)
@@ -148,7 +152,10 @@ def test_default_mesher_acceptance(case, fine):
 def test_feature_curves_are_mesh_edges():
     geometry, features, _, _ = packed("junction-edge")
     mesh = meshed("junction-edge")
-    edges = {tuple(sorted(e)) for e in np.concatenate([mesh.tets[:, [i, j]] for i in range(4) for j in range(i + 1, 4)]).tolist()}
+    edges = {
+        tuple(sorted(e))
+        for e in np.concatenate([mesh.tets[:, [i, j]] for i in range(4) for j in range(i + 1, 4)]).tolist()
+    }
     curve_nodes = np.flatnonzero(mesh.node_level == NODE_LEVELS.index("curve"))
     junction = features.curves.index(features.named("junction")[0])
     on_junction = curve_nodes[mesh.node_entity[curve_nodes] == junction]
@@ -191,10 +198,16 @@ def mesh_file(tmp_path, mesh, size):
     import yaml
 
     mesh.export(tmp_path / "solid.stl")
-    (tmp_path / "job.yaml").write_text(yaml.safe_dump({"geometry": {"file": "solid.stl"}, "size": size,
-                                                       "output": {"formats": ["vtu"]}}))
-    run = subprocess.run([sys.executable, "-m", "engine.cli", "mesh", "job.yaml", "--quiet"], cwd=tmp_path,
-                         capture_output=True, text=True, timeout=300)
+    (tmp_path / "job.yaml").write_text(
+        yaml.safe_dump({"geometry": {"file": "solid.stl"}, "size": size, "output": {"formats": ["vtu"]}})
+    )
+    run = subprocess.run(
+        [sys.executable, "-m", "engine.cli", "mesh", "job.yaml", "--quiet"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     out = tmp_path / "out" / "mesh.vtu"
     return run.returncode, run.stderr, meshio.read(out) if out.exists() else None
 
@@ -226,12 +239,14 @@ def test_a_smooth_torus_is_cut_into_charts_and_meshed(tmp_path):
     volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
     assert (volumes > 0).all()
     assert volumes.sum() == pytest.approx(surface.volume, rel=0.01)
+
     def off_torus(points):
         return np.abs(np.hypot(np.hypot(points[:, 0], points[:, 1]) - 20.0, points[:, 2]) - 6.0)
 
     faceting = off_torus(np.vstack([surface.sample(20_000, seed=0), surface.triangles_center])).max()
-    assert off_torus(mesh.points[mesh.point_data["node_level"] < 3]).max() <= faceting * 1.05, \
+    assert off_torus(mesh.points[mesh.point_data["node_level"] < 3]).max() <= faceting * 1.05, (
         "surface nodes on the input surface"
+    )
     assert tet_quality(mesh.points, mesh.cells_dict["tetra"]).min_dihedral.min() >= 10.0
 
 
@@ -270,8 +285,9 @@ def test_pymeshlab_agrees_the_boundary_is_closed_and_close_to_the_input():
     meshes.add_mesh(pymeshlab.Mesh(mesh.points[used], local.reshape(-1, 3)))
     meshes.add_mesh(pymeshlab.Mesh(np.asarray(geometry.mesh.vertices), np.asarray(geometry.mesh.faces)))
     for direction, (sampled, target) in (("hausdorff_mesh_to_input", (0, 1)), ("hausdorff_input_to_mesh", (1, 0))):
-        theirs = meshes.get_hausdorff_distance(sampledmesh=sampled, targetmesh=target, samplevert=True,
-                                               sampleface=True, samplenum=200_000)["max"]
+        theirs = meshes.get_hausdorff_distance(
+            sampledmesh=sampled, targetmesh=target, samplevert=True, sampleface=True, samplenum=200_000
+        )["max"]
         assert report[direction]["max"] == pytest.approx(theirs, rel=0.2, abs=1e-3 * geometry.scale), direction
         assert report[direction]["max_over_h"] >= report[direction]["max"] / sizing.h_max
     assert report["triangle_quality"]["min"] > 0.2
@@ -291,11 +307,12 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
     tets, boundary, patch, removed = peel_boundary_slivers(points, tets, boundary, patch, FLOOR)
     assert removed == 1 and len(tets) == 2 and len(boundary) == len(patch) == 6
 
-    def rotated(faces):   # each face from its smallest node: same set = same faces, same orientation
+    def rotated(faces):  # each face from its smallest node: same set = same faces, same orientation
         return {tuple(np.roll(f, -int(np.argmin(f)))) for f in np.asarray(faces).tolist()}
 
-    assert rotated(boundary) == rotated(TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64))
-                                        .boundary_faces())
+    assert rotated(boundary) == rotated(
+        TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+    )
     assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}
 
 
@@ -314,8 +331,10 @@ def test_an_inner_edge_of_needles_is_swapped_away():
     assert signed_volumes(points, swapped).sum() == pytest.approx(signed_volumes(points, tets).sum())
 
     def free(t):
-        return {tuple(sorted(f)) for f in TetMesh(points, t, np.zeros(5, np.int8), np.zeros(5, np.int64))
-                .boundary_faces().tolist()}
+        return {
+            tuple(sorted(f))
+            for f in TetMesh(points, t, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces().tolist()
+        }
 
     assert free(swapped) == free(tets)
 
@@ -334,6 +353,7 @@ def test_a_crowded_surface_node_is_collapsed_along_a_boundary_edge():
     collapsible = np.array([False, False, False, False, True])
     tets, boundary, patch, collapsed = collapse_bad_nodes(points, tets, boundary, patch, FLOOR, collapsible)
     assert collapsed == 1 and len(tets) == 1 and len(boundary) == len(patch) == 4
-    assert {tuple(np.roll(f, -int(np.argmin(f)))) for f in boundary.tolist()} == \
-        {tuple(np.roll(f, -int(np.argmin(f)))) for f in TetMesh(points, tets, np.zeros(5, np.int8),
-                                                                np.zeros(5, np.int64)).boundary_faces().tolist()}
+    assert {tuple(np.roll(f, -int(np.argmin(f)))) for f in boundary.tolist()} == {
+        tuple(np.roll(f, -int(np.argmin(f))))
+        for f in TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces().tolist()
+    }

@@ -1,13 +1,15 @@
 """Plug-ins registered by entry point: the example package of examples/plugin meshes through the pipeline and
 keeps the contracts; a plug-in that does not take what the pipeline passes, or does not load, is refused in one
 line before any work."""
+
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 import yaml
+from test_meshers import check_packer_contract
 
 from engine.cli import main
 from engine.errors import JobError
@@ -15,7 +17,6 @@ from engine.job import load_job
 from engine.meshing import MESHERS
 from engine.packing import PACKERS
 from engine.pipeline import run
-from test_meshers import check_packer_contract
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "plugin"
 
@@ -26,12 +27,15 @@ def register(monkeypatch, folder: Path, name: str, entry_points: dict) -> None:
     info = folder / f"{name}-0.1.0.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1.0\n")
-    (info / "entry_points.txt").write_text("".join(
-        f"[{group}]\n" + "".join(f"{key} = {value}\n" for key, value in items.items())
-        for group, items in entry_points.items()))
+    (info / "entry_points.txt").write_text(
+        "".join(
+            f"[{group}]\n" + "".join(f"{key} = {value}\n" for key, value in items.items())
+            for group, items in entry_points.items()
+        )
+    )
     monkeypatch.syspath_prepend(str(folder))
     for registry in (PACKERS, MESHERS):
-        registry.get(registry.names()[0])   # the built-ins registered first
+        registry.get(registry.names()[0])  # the built-ins registered first
         monkeypatch.setattr(registry, "functions", dict(registry.functions))
         monkeypatch.setattr(registry, "broken", {})
         monkeypatch.setattr(registry, "_loaded", False)
@@ -39,8 +43,16 @@ def register(monkeypatch, folder: Path, name: str, entry_points: dict) -> None:
 
 def write_job(folder: Path, **keys) -> Path:
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "plate", "parameters": {"length": 60, "width": 40}},
-                                   "size": 6.0, "output": {"formats": ["vtu"]}, **keys}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"shape": "plate", "parameters": {"length": 60, "width": 40}},
+                "size": 6.0,
+                "output": {"formats": ["vtu"]},
+                **keys,
+            }
+        )
+    )
     return job
 
 
@@ -65,7 +77,8 @@ def test_the_example_plugin_meshes_through_its_entry_points(example_plugin, tmp_
 def test_a_packer_without_the_knowledge_argument_is_refused_before_any_work(tmp_path, monkeypatch, capsys):
     (tmp_path / "src").mkdir()
     (tmp_path / "src" / "old_packer.py").write_text(
-        "def pack(geometry, features, sizing, *, seed):\n    raise AssertionError('never called')\n")
+        "def pack(geometry, features, sizing, *, seed):\n    raise AssertionError('never called')\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path / "src"))
     register(monkeypatch, tmp_path / "site", "old_packer", {"fuzzymesh.packers": {"old": "old_packer:pack"}})
     assert main(["mesh", str(write_job(tmp_path, packer="old"))]) == 2
@@ -89,7 +102,8 @@ def test_a_plugin_meshers_broken_mesh_is_rejected_by_the_acceptance_gate(tmp_pat
         "from engine.mesh import TetMesh\nfrom engine.meshing import get_mesher\n\n\n"
         "def mesh(packing, geometry, features, *, seed):\n"
         "    whole = get_mesher('delaunay')(packing, geometry, features, seed=seed)\n"
-        "    return TetMesh(whole.points, whole.tets[1:], whole.node_level, whole.node_entity)\n")
+        "    return TetMesh(whole.points, whole.tets[1:], whole.node_level, whole.node_entity)\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path / "src"))
     register(monkeypatch, tmp_path / "site", "holed", {"fuzzymesh.meshers": {"holed": "holed_mesher:mesh"}})
     assert main(["mesh", str(write_job(tmp_path, mesher="holed"))]) == 4

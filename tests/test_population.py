@@ -1,5 +1,6 @@
 """Population rules per job: a job's knowledge folder replaces the shipped rule file by id, the audit cites
 the rules that fired by the file that defined them, every event is saved, and explain tells a node's history."""
+
 from __future__ import annotations
 
 import json
@@ -26,8 +27,11 @@ def mesh_with(folder: Path, rule_file: str) -> tuple[Path, object]:
     (folder / "rules").mkdir()
     (folder / "rules" / "population.yaml").write_text(rule_file)
     job = folder / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": "cylinder"}, "size": 12.0, "knowledge": ["rules"],
-                                   "output": {"formats": ["vtu"]}}))
+    job.write_text(
+        yaml.safe_dump(
+            {"geometry": {"shape": "cylinder"}, "size": 12.0, "knowledge": ["rules"], "output": {"formats": ["vtu"]}}
+        )
+    )
     return folder / "out", run(load_job(job))
 
 

@@ -1,4 +1,5 @@
 """Progress bars: on a terminal they show, with --quiet or into a pipe they stay silent."""
+
 from __future__ import annotations
 
 import io

@@ -1,4 +1,5 @@
 """Tetrahedron quality metrics on tetrahedra whose values are known."""
+
 import math
 import time
 
@@ -24,7 +25,7 @@ def test_right_corner_tetrahedron():
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
     q = tet_quality(points, np.array([[0, 1, 2, 3]]))
     assert q.volume[0] == pytest.approx(1 / 6)
-    assert q.min_dihedral[0] == pytest.approx(54.7356, abs=1e-3)   # at the slanted face's edges
+    assert q.min_dihedral[0] == pytest.approx(54.7356, abs=1e-3)  # at the slanted face's edges
     assert q.max_dihedral[0] == pytest.approx(90.0)
     inradius = 1 / (3 + math.sqrt(3))
     circumradius = math.sqrt(3) / 2

@@ -16,6 +16,7 @@ are not executed as written, and the test says so in its output instead of skipp
 
 Every other line, heredocs included, runs verbatim.
 """
+
 from __future__ import annotations
 
 import os
@@ -65,10 +66,18 @@ def test_every_bash_block_of_the_readme_runs(tmp_path):
         script = as_run(block)
         if script != block:
             print(f"README bash block {number} runs as:\n{script}")
-        run = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, env=env,
-                             capture_output=True, text=True, timeout=600)
-        assert run.returncode == 0, (f"README bash block {number} ({block.splitlines()[0]!r}) failed:\n"
-                                     f"{run.stdout[-2000:]}\n{run.stderr[-3000:]}")
+        run = subprocess.run(
+            ["bash", "-euo", "pipefail", "-c", script],
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert run.returncode == 0, (
+            f"README bash block {number} ({block.splitlines()[0]!r}) failed:\n"
+            f"{run.stdout[-2000:]}\n{run.stderr[-3000:]}"
+        )
         assert "Traceback" not in run.stderr
     assert (tmp_path / "plate-out" / "mesh.report.html").is_file()
     assert (tmp_path / "bearing-out" / "mesh.audit.json").is_file()

@@ -1,12 +1,13 @@
 """Every shipped recipe meshes its matching parametric shape end to end, and refines where it says."""
+
 import meshio
 import numpy as np
 import pytest
 import yaml
+from conftest import shape_and_features
 
 from engine.cli import main
 from engine.knowledge import load_knowledge
-from conftest import shape_and_features
 
 CASES = {
     # recipe: (shape, parameters, global size, the named feature it must refine at)
@@ -32,8 +33,16 @@ def edge_lengths(mesh):
 def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe):
     shape_name, parameters, size, feature_name = CASES[recipe]
     job = tmp_path / "job.yaml"
-    job.write_text(yaml.safe_dump({"geometry": {"shape": shape_name, "parameters": parameters}, "size": size,
-                                   "recipe": recipe, "output": {"formats": ["vtu"]}}))
+    job.write_text(
+        yaml.safe_dump(
+            {
+                "geometry": {"shape": shape_name, "parameters": parameters},
+                "size": size,
+                "recipe": recipe,
+                "output": {"formats": ["vtu"]},
+            }
+        )
+    )
     assert main(["mesh", str(job), "--quiet"]) == 0
     mesh = meshio.read(tmp_path / "out" / "mesh.vtu")
     p = mesh.points[mesh.cells_dict["tetra"]]
@@ -46,6 +55,7 @@ def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe):
     anchor = feature.points if hasattr(feature, "points") else feature.vertices
     midpoints, lengths = edge_lengths(mesh)
     from scipy.spatial import cKDTree
+
     distance, _ = cKDTree(anchor).query(midpoints)
     near = lengths[distance < 0.5 * size].mean()
     far = lengths[distance > 4 * size].mean()

@@ -1,5 +1,6 @@
 """The report: JSON figures, a self-contained HTML page with plots and an interactive 3-D view, regenerated from
 the saved files, and rendered by a real headless browser."""
+
 from __future__ import annotations
 
 import base64
@@ -17,8 +18,15 @@ from engine.cli import main
 from engine.job import default_job
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync"]
+FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 IMAGES = r'src="data:image/png;base64,([^"]+)"'
 
 
@@ -35,8 +43,10 @@ def view_data(page: str):
     """(meta, arrays) of the page's 3-D view, decoded as report_view.js decodes them."""
     meta = json.loads(re.search(r'<script type="application/json" id="view-meta">(.*?)</script>', page).group(1))
     blob = gzip.decompress(base64.b64decode(re.search(r'id="view-mesh">([^<]*)<', page).group(1)))
-    arrays = {name: np.frombuffer(blob, dtype=kind, count=size, offset=offset)
-              for name, (offset, kind, size) in meta["arrays"].items()}
+    arrays = {
+        name: np.frombuffer(blob, dtype=kind, count=size, offset=offset)
+        for name, (offset, kind, size) in meta["arrays"].items()
+    }
     return meta, arrays
 
 
@@ -84,7 +94,7 @@ def test_the_cuts_go_through_the_finest_element_at_the_junction(meshed):
     # at the junction (cylinder x = 35..85), on the side of the ligament to the plate edge x = 100
     assert 80 < finest.point[0] < 100 and abs(finest.point[1]) < 5
     assert [axis for axis, _ in finest.planes] == [1, 2]
-    titles = re.findall(r'<h2>(Cut at [^<]*)</h2>', page_of(out))
+    titles = re.findall(r"<h2>(Cut at [^<]*)</h2>", page_of(out))
     assert titles == [f"Cut at y = {finest.planes[0][1]:.4g}", f"Cut at z = {finest.planes[1][1]:.4g}"]
     assert f"h = {h[finest.element]:.4g}" in page_of(out) and "on curve-8 (junction)" in page_of(out)
 
@@ -121,12 +131,15 @@ def test_the_view_holds_every_element_with_its_audit(meshed):
     meta, a = view_data(page_of(out))
     m = len(result.mesh.tets)
     assert len(a["element"]) == m and (a["element"] == np.arange(m)).all()
-    assert np.allclose(a["points"].reshape(-1, 3)[a["tets"].reshape(-1, 4)], result.mesh.points[result.mesh.tets],
-                       atol=1e-4)
+    assert np.allclose(
+        a["points"].reshape(-1, 3)[a["tets"].reshape(-1, 4)], result.mesh.points[result.mesh.tets], atol=1e-4
+    )
     assert (a["neighbours"] >= 0).sum() % 2 == 0 and (a["neighbours"] < 0).sum() == len(result.mesh.boundary)
     for name in ("h_target", "winner", "zone", "runner_up", "graded"):
         assert np.allclose(a[name], result.audit.cells[name], rtol=1e-6), name
-    assert [p["id"] for p in meta["patterns"]] == [p["id"] for p in json.loads((out / "mesh.audit.json").read_text())["patterns"]]
+    assert [p["id"] for p in meta["patterns"]] == [
+        p["id"] for p in json.loads((out / "mesh.audit.json").read_text())["patterns"]
+    ]
     assert f"All {m:,} elements." in page_of(out)
 
 
@@ -171,7 +184,7 @@ def browser_or_skip():
 
 
 def colours_present(pixels: np.ndarray, colour: str) -> int:
-    rgb = np.array([int(colour[i:i + 2], 16) for i in (1, 3, 5)]) / 255
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)]) / 255
     return int((np.abs(pixels - rgb).max(axis=2) < 0.02).sum())
 
 
@@ -194,8 +207,9 @@ def test_a_headless_browser_shows_the_3d_view_and_an_elements_audit(meshed, tmp_
         view.screenshot(path=tmp_path / "view.png")
         box = view.bounding_box()
         page.mouse.click(box["x"] + 0.4 * box["width"], box["y"] + 0.6 * box["height"])
-        page.wait_for_function("document.getElementById('view-audit').textContent.startsWith('element ')",
-                               timeout=20_000)
+        page.wait_for_function(
+            "document.getElementById('view-audit').textContent.startsWith('element ')", timeout=20_000
+        )
         audit = page.inner_text("#view-audit")
         page.select_option("#view-colour", "winner")
         page.fill("#view-cut", "300")
@@ -205,18 +219,26 @@ def test_a_headless_browser_shows_the_3d_view_and_an_elements_audit(meshed, tmp_
         page.screenshot(path=tmp_path / "page.png", full_page=True)
         browser.close()
     assert not problems, problems
-    for line in ("pattern: ", "zone: ", "membership: mu = ", "h_target = ", "h_actual = ", "runner-up: ", "graded: ",
-                 "rule: placed at "):
+    for line in (
+        "pattern: ",
+        "zone: ",
+        "membership: mu = ",
+        "h_target = ",
+        "h_actual = ",
+        "runner-up: ",
+        "graded: ",
+        "rule: placed at ",
+    ):
         assert line in audit, audit
     assert re.search(r"\.yaml:\d+:\d+", audit), "the rule's file:line"
     pixels = matplotlib.image.imread(tmp_path / "view.png")[..., :3]
-    coloured = (pixels.max(axis=2) - pixels.min(axis=2)) > 0.15      # not white, grey or black: the mesh's colours
+    coloured = (pixels.max(axis=2) - pixels.min(axis=2)) > 0.15  # not white, grey or black: the mesh's colours
     assert coloured.mean() > 0.1, f"the canvas is blank ({coloured.mean():.3f} coloured)"
     assert len(np.unique((pixels[coloured] * 16).astype(int), axis=0)) > 20, "a colour scale, not one flat colour"
     winner = matplotlib.image.imread(tmp_path / "winner.png")[..., :3]
     red, green, blue = winner[..., 0], winner[..., 1], winner[..., 2]
-    pink = (red - green > 0.2) & (red - blue > 0.1)     # the junction pattern's #ee6677, shaded; not in viridis
+    pink = (red - green > 0.2) & (red - blue > 0.1)  # the junction pattern's #ee6677, shaded; not in viridis
     assert pink.sum() > 500, "coloured by winning pattern"
     whole = matplotlib.image.imread(tmp_path / "page.png")[..., :3]
-    for colour in ("#4477aa", "#228833", "#aa3377"):    # the plots: histogram blue, conformity green, timing purple
+    for colour in ("#4477aa", "#228833", "#aa3377"):  # the plots: histogram blue, conformity green, timing purple
         assert colours_present(whole, colour) > 2000, colour

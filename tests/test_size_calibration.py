@@ -1,6 +1,7 @@
 """h is the target mean edge length (docs/rules.md section 4): the bubble packer is calibrated so that the median
 of edge length / h is 1.00 +- 0.05 on the built-in shapes, the element-count estimate holds, and an element is
 'graded' only where the gradation limit lowered its h by more than GRADED_THRESHOLD (1 %)."""
+
 import numpy as np
 import pytest
 
@@ -15,8 +16,12 @@ CASES = {
     "plate": {"geometry": {"shape": "plate"}, "size": 20.0},
     "l_bracket": {"geometry": {"shape": "l_bracket"}, "size": 8.0},
     "hollow_sphere_octant": {"geometry": {"shape": "hollow_sphere_octant"}, "size": 10.0},
-    "plate_with_hole static-stress": {"geometry": {"shape": "plate_with_hole"}, "size": 10, "min_size": 2,
-                                      "recipe": "static-stress"},
+    "plate_with_hole static-stress": {
+        "geometry": {"shape": "plate_with_hole"},
+        "size": 10,
+        "min_size": 2,
+        "recipe": "static-stress",
+    },
 }
 _RESULTS = {}
 
@@ -37,8 +42,10 @@ def test_median_edge_over_h_is_one_and_the_estimate_holds(case):
     r = result(case)
     nodes, tets = r.sizing.expected_counts
     median = r.conformity["median"]
-    print(f"{case}: edge / h median {median:.3f}; {len(r.packing)} bubbles, estimate {nodes:.0f} "
-          f"({len(r.packing) / nodes:.3f}); {len(r.mesh.tets)} tetrahedra, estimate {tets:.0f}")
+    print(
+        f"{case}: edge / h median {median:.3f}; {len(r.packing)} bubbles, estimate {nodes:.0f} "
+        f"({len(r.packing) / nodes:.3f}); {len(r.mesh.tets)} tetrahedra, estimate {tets:.0f}"
+    )
     assert r.packing.stats["diameter"] == pytest.approx(0.87)
     assert 0.95 <= median <= 1.05
     assert 0.9 <= len(r.packing) / nodes <= 1.1, "the node estimate holds within 10 %"

@@ -1,4 +1,5 @@
 """Sizing by membership dominance: properties of the composed field, its gradation and explain."""
+
 import re
 
 import numpy as np
@@ -24,20 +25,31 @@ def sizing_for(job_dict):
     return geometry, build_sizing(job, geometry, features, KB)
 
 
-region = st.fixed_dictionaries({
-    "centre": st.tuples(st.floats(-90, 90), st.floats(-40, 40), st.floats(0, 20)),
-    "radius": st.floats(2, 30), "size": st.floats(0.8, 6), "peak": st.floats(0.3, 1.0),
-    "transition": st.floats(0, 20)})
+region = st.fixed_dictionaries(
+    {
+        "centre": st.tuples(st.floats(-90, 90), st.floats(-40, 40), st.floats(0, 20)),
+        "radius": st.floats(2, 30),
+        "size": st.floats(0.8, 6),
+        "peak": st.floats(0.3, 1.0),
+        "transition": st.floats(0, 20),
+    }
+)
 
 
 def plate_job(regions, size=12.0):
-    place = [{"pattern": "uniform-region", "region": {"sphere": {"centre": list(r["centre"]), "radius": r["radius"]}},
-              "parameters": {"size": r["size"], "peak": r["peak"], "transition": r["transition"]}} for r in regions]
+    place = [
+        {
+            "pattern": "uniform-region",
+            "region": {"sphere": {"centre": list(r["centre"]), "radius": r["radius"]}},
+            "parameters": {"size": r["size"], "peak": r["peak"], "transition": r["transition"]},
+        }
+        for r in regions
+    ]
     return {"geometry": {"shape": "plate_with_hole"}, "size": size, "recipe": "static-stress", "place": place}
 
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(regions=st.lists(region, min_size=1, max_size=4), seed=st.integers(0, 2 ** 16))
+@given(regions=st.lists(region, min_size=1, max_size=4), seed=st.integers(0, 2**16))
 def test_the_pattern_with_the_highest_membership_sets_the_raw_size(regions, seed):
     geometry, sizing = sizing_for(plate_job(regions))
     points = np.random.default_rng(seed).uniform(*geometry.bounds, size=(4000, 3))
@@ -55,8 +67,7 @@ def test_the_pattern_with_the_highest_membership_sets_the_raw_size(regions, seed
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(regions=st.lists(region, min_size=1, max_size=3), seed=st.integers(0, 2 ** 16),
-       steps=st.floats(0.01, 4.0))
+@given(regions=st.lists(region, min_size=1, max_size=3), seed=st.integers(0, 2**16), steps=st.floats(0.01, 4.0))
 def test_graded_size_grows_no_faster_than_the_limit(regions, seed, steps):
     """h(y) <= h(x) + (g - 1)|x - y| for neighbouring points, closer or farther than a grid cell."""
     geometry, sizing = sizing_for(plate_job(regions, size=15.0))
@@ -70,10 +81,18 @@ def test_graded_size_grows_no_faster_than_the_limit(regions, seed, steps):
 
 
 def test_gradation_connects_fine_and_coarse_regions():
-    job = {"geometry": {"shape": "plate"}, "size": 20.0,
-           "place": [{"pattern": "uniform-domain"},
-                     {"pattern": "uniform-region", "region": {"sphere": {"centre": [-50, 0, 10], "radius": 10}},
-                      "parameters": {"size": 1.0}}]}
+    job = {
+        "geometry": {"shape": "plate"},
+        "size": 20.0,
+        "place": [
+            {"pattern": "uniform-domain"},
+            {
+                "pattern": "uniform-region",
+                "region": {"sphere": {"centre": [-50, 0, 10], "radius": 10}},
+                "parameters": {"size": 1.0},
+            },
+        ],
+    }
     geometry, sizing = sizing_for(job)
     line = np.column_stack([np.linspace(-50, 95, 400), np.zeros(400), np.full(400, 10.0)])
     audit = sizing.evaluate(line)
@@ -89,8 +108,11 @@ def test_junction_edge_is_finer_towards_the_near_plate_edge():
     # the cylinder (radius 25) stands at x = 60: 15 mm from the edge x = 100; same distance on the far side
     near_side, far_side = np.array([[92.5, 0, 15]]), np.array([[27.5, 0, 15]])
     assert sizing(near_side)[0] < 0.75 * sizing(far_side)[0]
-    centre_job = {"geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": 0}}, "size": 10,
-                  "recipe": "junction-edge"}
+    centre_job = {
+        "geometry": {"shape": "plate_cylinder_junction", "parameters": {"offset": 0}},
+        "size": 10,
+        "recipe": "junction-edge",
+    }
     _, centred = sizing_for(centre_job)
     assert sizing(near_side)[0] < 0.75 * centred(np.array([[32.5, 0, 15]]))[0]
     assert [z.zone.id for z in centred.placed[1].zones] == ["junction"], "no edge-corner zone far from the edge"
@@ -119,8 +141,9 @@ def test_sizing_speed_figure(capsys):
     """Not a timed test: prints the evaluation time of 200k points for the record."""
     import time
 
-    geometry, sizing = sizing_for(plate_job([{"centre": (0, 0, 5), "radius": 10, "size": 1.0, "peak": 0.9,
-                                              "transition": 0}]))
+    geometry, sizing = sizing_for(
+        plate_job([{"centre": (0, 0, 5), "radius": 10, "size": 1.0, "peak": 0.9, "transition": 0}])
+    )
     points = np.random.default_rng(0).uniform(*geometry.bounds, size=(200_000, 3))
     start = time.perf_counter()
     h = sizing(points)
@@ -130,8 +153,9 @@ def test_sizing_speed_figure(capsys):
 
 def test_the_fast_path_equals_the_audited_size():
     """sizing(points) skips the raw composition because the graded grid never exceeds it."""
-    geometry, sizing = sizing_for({"geometry": {"shape": "plate_cylinder_junction"}, "size": 10,
-                                   "recipe": "junction-edge"})
+    geometry, sizing = sizing_for(
+        {"geometry": {"shape": "plate_cylinder_junction"}, "size": 10, "recipe": "junction-edge"}
+    )
     points = np.random.default_rng(5).uniform(*geometry.bounds, size=(50_000, 3))
     audit = sizing.evaluate(points)
     assert (sizing._graded(points) <= audit.raw * (1 + 1e-12)).all()

@@ -1,6 +1,7 @@
 """Thin walls and narrow gaps: the local feature size measured by ray casting, the always-placed thin-wall and
 narrow-gap patterns (dominance 'tie': they win only where they ask for smaller elements), and meshes of a
 thin-walled tube and of a plate thinner than the global size."""
+
 import json
 
 import manifold3d as m3
@@ -45,6 +46,7 @@ def pieces_where(local, test):
 
 # ------------------------------------------------------------------------------------------ measure
 
+
 def test_slab_thickness_on_its_faces_and_none_small_at_its_corners():
     slab = solid(m3.Manifold.cube([100, 100, 2]))
     local = measure(slab.vertices, slab.faces)
@@ -64,9 +66,12 @@ def test_tube_wall_within_a_few_percent_and_its_bore_no_narrow_gap():
     t = tube()
     local = measure(t.vertices, t.faces)
     radius = np.hypot(*pieces_where(local, lambda c: c[:, :2]).T)
-    wall = radius < 5.0 - 1e-6   # the faceted inner and outer faces (ends: radius up to 5 too, but on z = 0, 58)
-    sides = (radius > 4.6) & ~np.isclose(local.triangles.mean(axis=1)[:, 2], 0) & \
-        ~np.isclose(local.triangles.mean(axis=1)[:, 2], 58)
+    wall = radius < 5.0 - 1e-6  # the faceted inner and outer faces (ends: radius up to 5 too, but on z = 0, 58)
+    sides = (
+        (radius > 4.6)
+        & ~np.isclose(local.triangles.mean(axis=1)[:, 2], 0)
+        & ~np.isclose(local.triangles.mean(axis=1)[:, 2], 58)
+    )
     assert sides.sum() > 200 and wall.any()
     assert np.allclose(local.thickness[sides], 0.3, rtol=0.03)
     bore = local.gap[np.isfinite(local.gap)]
@@ -87,10 +92,12 @@ def test_rib_on_a_block_measures_the_rib_and_the_block():
 
 
 def test_an_acute_wedge_tip_is_no_wall_and_a_slot_is_a_gap():
-    angle = np.radians(20)   # wider than OPPOSITE_WITHIN: the faces at the tip are not the two sides of a wall
+    angle = np.radians(20)  # wider than OPPOSITE_WITHIN: the faces at the tip are not the two sides of a wall
     base = np.array([[0, 0, 0], [60, 0, 0], [60 * np.cos(angle), 60 * np.sin(angle), 0]])
-    local = measure(np.vstack([base, base + [0, 0, 15]]),
-                    np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]))
+    local = measure(
+        np.vstack([base, base + [0, 0, 15]]),
+        np.array([[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]),
+    )
     assert local.thickness[np.isfinite(local.thickness)].min() == pytest.approx(15.0, rel=1e-3)
     slotted = solid(m3.Manifold.cube([30, 20, 10]) - m3.Manifold.cube([1, 30, 8]).translate([14.5, -5, 3]))
     local = measure(slotted.vertices, slotted.faces)
@@ -102,16 +109,31 @@ def test_an_acute_wedge_tip_is_no_wall_and_a_slot_is_a_gap():
 
 # ---------------------------------------------------------------------------------------- knowledge
 
+
 def test_every_job_gets_the_always_placed_patterns_unless_it_places_them_itself():
     plate = {"geometry": {"shape": "plate_with_hole"}}
-    assert [p.pattern for p in job_placements(job_from_dict(plate), KB)] == \
-        ["uniform-domain", "thin-wall", "narrow-gap", "curvature"]
-    assert [p.pattern for p in job_placements(job_from_dict({**plate, "recipe": "static-stress"}), KB)] == \
-        ["uniform-domain", "hole", "re-entrant-edge", "thin-wall", "narrow-gap", "curvature"]
+    assert [p.pattern for p in job_placements(job_from_dict(plate), KB)] == [
+        "uniform-domain",
+        "thin-wall",
+        "narrow-gap",
+        "curvature",
+    ]
+    assert [p.pattern for p in job_placements(job_from_dict({**plate, "recipe": "static-stress"}), KB)] == [
+        "uniform-domain",
+        "hole",
+        "re-entrant-edge",
+        "thin-wall",
+        "narrow-gap",
+        "curvature",
+    ]
     place = [{"pattern": "uniform-domain"}, {"pattern": "thin-wall", "parameters": {"through": 3}}]
     own = job_placements(job_from_dict({**plate, "place": place}), KB)
-    assert [(p.pattern, p.parameters) for p in own] == \
-        [("uniform-domain", {}), ("thin-wall", {"through": 3}), ("narrow-gap", {}), ("curvature", {})]
+    assert [(p.pattern, p.parameters) for p in own] == [
+        ("uniform-domain", {}),
+        ("thin-wall", {"through": 3}),
+        ("narrow-gap", {}),
+        ("curvature", {}),
+    ]
     assert KB.patterns["thin-wall"].dominance == "tie" and KB.patterns["thin-wall"].scale == "wall_thickness"
 
 
@@ -120,11 +142,20 @@ def test_thin_wall_sizes_a_thin_plate_and_never_coarsens_a_finer_pattern():
     inside a uniform-region of size 1 (membership 0.9 < 1) it ties and the region's finer size wins. The hole
     (20 wide) is a narrow gap at this H: narrow-gap asks 10 on its wall, and loses to thin-wall's 5; its wall is
     curved: the curvature rule asks 2.6 (24 elements around) within 5.2 of it."""
-    job = job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 20.0,
-                         "place": [{"pattern": "uniform-domain"},
-                                   {"pattern": "uniform-region", "region": {"sphere": {"centre": [50, 0, 5],
-                                                                                       "radius": 5}},
-                                    "parameters": {"size": 1.0}}]})
+    job = job_from_dict(
+        {
+            "geometry": {"shape": "plate_with_hole"},
+            "size": 20.0,
+            "place": [
+                {"pattern": "uniform-domain"},
+                {
+                    "pattern": "uniform-region",
+                    "region": {"sphere": {"centre": [50, 0, 5], "radius": 5}},
+                    "parameters": {"size": 1.0},
+                },
+            ],
+        }
+    )
     _, geometry, features, sizing = prepare(job)
     names = [p.pattern for p in sizing.placed]
     assert names.count("thin-wall") == 1 and names.count("narrow-gap") == 1
@@ -138,7 +169,7 @@ def test_thin_wall_sizes_a_thin_plate_and_never_coarsens_a_finer_pattern():
     assert (audit.winner[elsewhere] == thin).all() and np.allclose(audit.raw[elsewhere], 5.0, rtol=1e-3)
     competing = [k for k, p in enumerate(sizing.placed) if not p.ties]
     mu, sizes = audit.mu[:, competing], audit.sizes[:, competing]
-    best = sizes[np.arange(len(points)), np.argmax(mu, axis=1)]   # the winner without the tying patterns
+    best = sizes[np.arange(len(points)), np.argmax(mu, axis=1)]  # the winner without the tying patterns
     won = audit.winner == thin
     assert won.any() and (audit.sizes[won, thin] < best[won]).all(), "it wins only where it asks for smaller"
 
@@ -167,12 +198,13 @@ def test_the_element_guard_counts_the_thin_wall_refinement():
 
 # --------------------------------------------------------------------------------------------- meshes
 
+
 def containing_tet(points, tets, query, candidates=64):
     """Index of a tet containing each query point (among the tets with the nearest centroids), -1 if none."""
     from scipy.spatial import cKDTree
 
     _, near = cKDTree(points[tets].mean(axis=1)).query(query, k=candidates)
-    corners = points[tets[near]]                                          # (n, k, 4, 3)
+    corners = points[tets[near]]  # (n, k, 4, 3)
     edges = np.stack([corners[..., i, :] - corners[..., 0, :] for i in (1, 2, 3)], axis=-1)
     bary = np.linalg.solve(edges, (query[:, None, :] - corners[..., 0, :])[..., None])[..., 0]
     inside = (bary >= -1e-9).all(axis=-1) & (bary.sum(axis=-1) <= 1 + 1e-9)
@@ -212,8 +244,16 @@ def test_a_thin_walled_tube_meshes_with_two_elements_through_its_wall(tmp_path):
 def test_a_plate_thinner_than_the_global_size_meshes_without_slivers(tmp_path):
     """plate_with_hole 400 x 100 x 5 at size 10: before the thin-wall rule, min dihedral 2 deg (85 tets
     under 10 deg); now 2 elements through the plate."""
-    result, legend = mesh(tmp_path, {"geometry": {"shape": "plate_with_hole", "parameters": {
-        "length": 400, "width": 100, "thickness": 5, "hole_radius": 12}}, "size": 10})
+    result, legend = mesh(
+        tmp_path,
+        {
+            "geometry": {
+                "shape": "plate_with_hole",
+                "parameters": {"length": 400, "width": 100, "thickness": 5, "hole_radius": 12},
+            },
+            "size": 10,
+        },
+    )
     assert tet_quality(result.points, result.cells_dict["tetra"]).min_dihedral.min() >= 10.0
     thin = [q["index"] for q in legend["patterns"] if q["pattern"] == "thin-wall"]
     assert np.isin(result.cell_data["winner"][0], thin).mean() > 0.9

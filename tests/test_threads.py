@@ -1,5 +1,6 @@
 """OpenMP threads sleep while they wait (engine/_numba.py): the policy is set before the OpenMP runtime starts,
 and a user's own setting wins."""
+
 import functools
 import os
 import subprocess
@@ -8,16 +9,19 @@ from pathlib import Path
 
 import pytest
 
-PROBE = ("import os, engine.cli, engine.pipeline; "
-         "maps = open('/proc/self/maps').read() if os.path.exists('/proc/self/maps') else ''; "
-         "print(os.environ['OMP_WAIT_POLICY'], 'libgomp' in maps)")
+PROBE = (
+    "import os, engine.cli, engine.pipeline; "
+    "maps = open('/proc/self/maps').read() if os.path.exists('/proc/self/maps') else ''; "
+    "print(os.environ['OMP_WAIT_POLICY'], 'libgomp' in maps)"
+)
 
 
 @functools.lru_cache(maxsize=None)
 def probe(**env):
     clean = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
-    done = subprocess.run([sys.executable, "-c", PROBE], env={**clean, **env}, capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(
+        [sys.executable, "-c", PROBE], env={**clean, **env}, capture_output=True, text=True, timeout=120
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     return done.stdout.split()
 
@@ -50,8 +54,14 @@ def test_openmp_workers_do_not_spin_unless_asked(given, spin):
     env["OMP_DISPLAY_ENV"] = "VERBOSE"
     if given:
         env["OMP_WAIT_POLICY"] = given
-    run = subprocess.run([sys.executable, "-c", PROGRAM], capture_output=True, text=True, env=env, timeout=120,
-                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    run = subprocess.run(
+        [sys.executable, "-c", PROGRAM],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+        cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+    )
     assert run.returncode == 0, run.stderr
     if "GOMP_SPINCOUNT" not in run.stderr:
         pytest.skip("numba runs on a threading layer other than GNU OpenMP here")

@@ -1,5 +1,6 @@
 """FE validation (engine/validation): small versions of both cases against their published solutions, the
 CLI's table and its one-line refusal without the 'fe' extra, the convergence study's bookkeeping."""
+
 import json
 import sys
 
@@ -8,7 +9,7 @@ import pytest
 
 from engine.cli import main
 
-SPHERE_H10 = 2.8   # sphere scale giving h = 10 (wall thickness 50 / 14 x 2.8)
+SPHERE_H10 = 2.8  # sphere scale giving h = 10 (wall thickness 50 / 14 x 2.8)
 
 
 def fe():
@@ -24,7 +25,7 @@ def test_plate_hole_coarse_recipe_mesh_within_3_percent_of_peterson():
 
     case = run_case("plate-hole", scale=3.0)
     kt = case.row("Kt net, through-thickness mean")
-    assert kt.reference == pytest.approx(2.508, abs=1e-3)      # Peterson at d/W = 0.2
+    assert kt.reference == pytest.approx(2.508, abs=1e-3)  # Peterson at d/W = 0.2
     assert abs(kt.error) < 0.03, case.table()
     assert case.row("Kt net, faces").computed < kt.computed < case.row("Kt net, mid-plane").computed
     assert case.facts["max reaction / load"] < 1e-6, "the 3-2-1 supports carry no load: the load is balanced"
@@ -51,10 +52,10 @@ def test_lame_and_peterson_references():
 
     assert [round(peterson_kt(r), 3) for r in (0.1, 0.2, 0.3, 0.4, 0.5)] == [2.722, 2.508, 2.349, 2.236, 2.159]
     u, radial, hoop = lame(np.array([INNER, OUTER]))
-    assert radial == pytest.approx([-PRESSURE, 0.0], abs=1e-12)                 # the surface tractions
-    a3, b3 = INNER ** 3, OUTER ** 3
+    assert radial == pytest.approx([-PRESSURE, 0.0], abs=1e-12)  # the surface tractions
+    a3, b3 = INNER**3, OUTER**3
     assert hoop[0] == pytest.approx(PRESSURE * a3 * (1 + b3 / (2 * a3)) / (b3 - a3))
-    strain = (hoop - MATERIAL.nu * (radial + hoop)) / MATERIAL.E                # hoop strain = u / r
+    strain = (hoop - MATERIAL.nu * (radial + hoop)) / MATERIAL.E  # hoop strain = u / r
     assert u == pytest.approx(strain * np.array([INNER, OUTER]))
 
 
@@ -67,7 +68,7 @@ def test_cli_prints_the_table_and_exits_0(capsys):
 
 
 def test_cli_without_the_fe_extra_says_what_to_install(capsys, monkeypatch):
-    monkeypatch.setitem(sys.modules, "skfem", None)     # import skfem now raises ImportError
+    monkeypatch.setitem(sys.modules, "skfem", None)  # import skfem now raises ImportError
     assert main(["validate", "plate-hole"]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
@@ -96,13 +97,20 @@ def test_graded_series_at_scale_1_is_the_recipe():
     kb = load_knowledge([])
     geometry, features = build_geometry(recipe)
     points = np.random.default_rng(0).uniform(geometry.bounds[0], geometry.bounds[1], (2000, 3))
-    assert np.allclose(build_sizing(recipe, geometry, features, kb)(points),
-                       build_sizing(scaled, geometry, features, kb)(points))
+    assert np.allclose(
+        build_sizing(recipe, geometry, features, kb)(points), build_sizing(scaled, geometry, features, kb)(points)
+    )
     assert job(2.0)["size"] == pytest.approx(2 * default_size())
     # the study itself reads the sizing defaults without the always-placed thin-wall rule
     bare = job_from_dict(job(1.0, rules=False))
-    bare_scaled = job_from_dict({**geometry_and_seed, "knowledge": [str(k) for k in bare.knowledge],
-                                 "size": default_size(), "place": graded_placements(1.0, rules=False)})
+    bare_scaled = job_from_dict(
+        {
+            **geometry_and_seed,
+            "knowledge": [str(k) for k in bare.knowledge],
+            "size": default_size(),
+            "place": graded_placements(1.0, rules=False),
+        }
+    )
     study_kb = load_knowledge(bare.knowledge)
     study_sizing = build_sizing(bare, geometry, features, study_kb)
     assert [p.pattern for p in study_sizing.placed] == ["uniform-domain", "hole"]
@@ -116,25 +124,51 @@ def test_nodes_at_target_interpolates_where_the_series_stays_within():
     # the last mesh above 3 % is the one with 800 nodes; log-log between (800, 3.5 %) and (1600, 1 %)
     expected = np.exp(np.log(800) + (np.log(0.03) - np.log(0.035)) / (np.log(0.01) - np.log(0.035)) * np.log(2))
     assert nodes_at(rows) == pytest.approx(expected)
-    assert nodes_at(rows[:2]) is None                       # never within 3 %
-    assert nodes_at(rows[2:3] + rows[4:]) is None           # within 3 % from its coarsest mesh: not bracketed
+    assert nodes_at(rows[:2]) is None  # never within 3 %
+    assert nodes_at(rows[2:3] + rows[4:]) is None  # within 3 % from its coarsest mesh: not bracketed
 
 
 def test_study_averages_the_seeds_and_writes_table_json_and_a_small_plot(tmp_path):
     from engine.validation.study import means, nodes_at, write_study
 
-    rows = [{"series": s, "scale": k, "size": 5.6 * k, "nodes": n, "Kt": 2.5, "error": e, "seconds": {"mesh": 1.0},
-             "seed": seed}
-            for s, k, n, e, seed in (("graded", 4, 250, -0.05, 0), ("graded", 4, 260, -0.03, 1),
-                                     ("graded", 3, 400, -0.01, 0), ("graded", 3, 420, -0.02, 1),
-                                     ("uniform", 1.5, 600, -0.06, 0), ("uniform", 1.5, 640, -0.04, 1),
-                                     ("uniform", 1, 1700, -0.02, 0), ("uniform", 1, 1720, 0.0, 1))]
+    rows = [
+        {
+            "series": s,
+            "scale": k,
+            "size": 5.6 * k,
+            "nodes": n,
+            "Kt": 2.5,
+            "error": e,
+            "seconds": {"mesh": 1.0},
+            "seed": seed,
+        }
+        for s, k, n, e, seed in (
+            ("graded", 4, 250, -0.05, 0),
+            ("graded", 4, 260, -0.03, 1),
+            ("graded", 3, 400, -0.01, 0),
+            ("graded", 3, 420, -0.02, 1),
+            ("uniform", 1.5, 600, -0.06, 0),
+            ("uniform", 1.5, 640, -0.04, 1),
+            ("uniform", 1, 1700, -0.02, 0),
+            ("uniform", 1, 1720, 0.0, 1),
+        )
+    ]
     series = {name: means([r for r in rows if r["series"] == name]) for name in ("graded", "uniform")}
-    assert [(p["scale"], p["nodes"], p["error"], p["error_min"]) for p in series["graded"]] == \
-        [(4, 255, pytest.approx(-0.04), -0.05), (3, 410, pytest.approx(-0.015), -0.02)]
+    assert [(p["scale"], p["nodes"], p["error"], p["error_min"]) for p in series["graded"]] == [
+        (4, 255, pytest.approx(-0.04), -0.05),
+        (3, 410, pytest.approx(-0.015), -0.02),
+    ]
     at = {name: nodes_at(points) for name, points in series.items()}
-    study = {"case": "plate-hole", "target": 0.03, "Kt_peterson": 2.508, "seeds": [0, 1], "rows": rows,
-             "series": series, "nodes_at_target": at, "ratio": at["uniform"] / at["graded"]}
+    study = {
+        "case": "plate-hole",
+        "target": 0.03,
+        "Kt_peterson": 2.508,
+        "seeds": [0, 1],
+        "rows": rows,
+        "series": series,
+        "nodes_at_target": at,
+        "ratio": at["uniform"] / at["graded"],
+    }
     paths = write_study(study, tmp_path)
     assert json.loads(paths[0].read_text())["series"]["uniform"][1]["nodes"] == 1710
     table = paths[1].read_text()
@@ -146,8 +180,8 @@ def test_hollow_sphere_octant_is_named_for_its_boundary_conditions(built):
     shape, features = built("hollow_sphere_octant")
     names = sorted(n for p in features.patches for n in p.names)
     assert names == ["inner", "outer", "symmetry-x", "symmetry-y", "symmetry-z"]
-    exact = np.pi / 6 * (100.0 ** 3 - 50.0 ** 3)
-    assert shape.geometry.volume == pytest.approx(exact, rel=2e-3)     # faceted within 0.1 % of the radii
+    exact = np.pi / 6 * (100.0**3 - 50.0**3)
+    assert shape.geometry.volume == pytest.approx(exact, rel=2e-3)  # faceted within 0.1 % of the radii
     centres = shape.geometry.mesh.triangles_center
     for name, radius in (("inner", 50.0), ("outer", 100.0)):
         (patch,) = [p for p in features.patches if name in p.names]

@@ -11,6 +11,7 @@ positively oriented tetrahedra, every node used, node tags from the packing
 and seed, counts and stage times in ``TetMesh.stats``. A mesher that
 conforms to the surface also fills ``TetMesh.boundary`` / ``boundary_patch``.
 """
+
 from __future__ import annotations
 
 from ..plugins import Mesher

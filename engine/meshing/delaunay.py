@@ -13,6 +13,7 @@
    is still under the floor is repaired by peels, collapses and swaps, then
    Gmsh's optimiser and the relocation run once more, and the repairs again.
 """
+
 from __future__ import annotations
 
 import logging
@@ -24,16 +25,25 @@ from ..levels import STEINER
 from ..mesh import TetMesh, signed_volumes
 from ..packing import CURVE, PATCH, VOLUME
 from . import register_mesher
-from .improve import (FLOOR, TARGET, collapse_bad_nodes, gmsh_optimize, min_dihedrals, peel_boundary_slivers,
-                      quality_below, relocate, swap_bad_faces)
+from .improve import (
+    FLOOR,
+    TARGET,
+    collapse_bad_nodes,
+    gmsh_optimize,
+    min_dihedrals,
+    peel_boundary_slivers,
+    quality_below,
+    relocate,
+    swap_bad_faces,
+)
 from .surface import triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
 log = logging.getLogger(__name__)
 
-RESTORE_ROUNDS = 4   # rounds of putting back slid nodes whose tets turned non-positive
-SURFACE_TOLERANCE = 0.05   # x h: how far from the input surface a peel or collapse may put boundary faces
-REPAIR_ROUNDS = 4    # rounds of peels, collapses and swaps of what is still under the floor
+RESTORE_ROUNDS = 4  # rounds of putting back slid nodes whose tets turned non-positive
+SURFACE_TOLERANCE = 0.05  # x h: how far from the input surface a peel or collapse may put boundary faces
+REPAIR_ROUNDS = 4  # rounds of peels, collapses and swaps of what is still under the floor
 
 
 @register_mesher("delaunay")
@@ -42,7 +52,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     packing_in = packing
     start = time.perf_counter()
     surface = triangulate_boundary(packing, geometry, features)
-    packing = surface.nodes            # with the curve nodes added where chain edges were split
+    packing = surface.nodes  # with the curve nodes added where chain edges were split
     keep = np.ones(len(packing), bool)
     keep[surface.dropped] = False
     nodes = np.flatnonzero(keep)
@@ -56,11 +66,12 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     points = np.vstack([points, steiner])
     level = np.concatenate([packing.level[nodes], np.full(len(steiner), STEINER)]).astype(np.int8)
     entity = np.concatenate([packing.entity[nodes], np.full(len(steiner), -1)]).astype(np.int64)
-    bubble = np.concatenate([packing.ids[nodes] if packing.ids is not None else np.full(len(nodes), -1),
-                             np.full(len(steiner), -1)]).astype(np.int64)
+    bubble = np.concatenate(
+        [packing.ids[nodes] if packing.ids is not None else np.full(len(nodes), -1), np.full(len(steiner), -1)]
+    ).astype(np.int64)
     hull_tets = len(tets)
     tets = tets[inside_by_boundary(points, tets, boundary)]
-    tets = canonical(orient(points, tets)[0])    # Gmsh's order varies from run to run
+    tets = canonical(orient(points, tets)[0])  # Gmsh's order varies from run to run
     seconds["connect"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -68,19 +79,23 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     fixed = (level != VOLUME) & (level != STEINER)
     points, tets = gmsh_optimize(points, tets, fixed)
     slide = _slide_directions(points, level, entity, geometry, features)
-    surface_node = np.nan_to_num(slide[1]).any(axis=1)   # patch and smooth-cut nodes: they slide on the surface
+    surface_node = np.nan_to_num(slide[1]).any(axis=1)  # patch and smooth-cut nodes: they slide on the surface
     points, moves = relocate(points, tets, slide[0], seed)
-    if (quality_below(points, tets, TARGET)).any():   # last pass: curved-patch nodes slide too
+    if (quality_below(points, tets, TARGET)).any():  # last pass: curved-patch nodes slide too
         unslid = points
         points, more = relocate(points, tets, slide[1], seed)
         moves += more
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
-        points[slid] = geometry.closest_point(points[slid])[0]   # back onto the surface
+        points[slid] = geometry.closest_point(points[slid])[0]  # back onto the surface
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
-    h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])   # Steiner nodes stay inside
-    repair = _Repair(surface_node, surface_node | (level == VOLUME) | (level == STEINER), _on_surface(geometry),
-                     SURFACE_TOLERANCE * h)
+    h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])  # Steiner nodes stay inside
+    repair = _Repair(
+        surface_node,
+        surface_node | (level == VOLUME) | (level == STEINER),
+        _on_surface(geometry),
+        SURFACE_TOLERANCE * h,
+    )
     tets, boundary, patch = repair(points, tets, boundary, surface.patch)
     if quality_below(points, tets, FLOOR).any():
         # relocation and the repairs change the tets Gmsh's swaps saw: they may now take what is left
@@ -93,17 +108,34 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
 
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
     boundary = renumber[boundary]
-    stats = {"boundary_triangles": len(boundary), "crowded_surface_nodes_dropped": len(surface.dropped),
-             "curve_nodes_added": int((packing.level == CURVE).sum() - (packing_in.level == CURVE).sum()),
-             "patch_nodes_added": int((packing.level == PATCH).sum() - (packing_in.level == PATCH).sum()),
-             "steiner_points": len(steiner), "hull_tets": hull_tets, "outside_tets_dropped": hull_tets - len(tets),
-             "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
-             "min_dihedral_before_improvement": before, "relocated_nodes": moves, "boundary_slivers_removed": peeled,
-             "nodes_collapsed": collapsed, "faces_swapped": repair.swapped,
-             "seconds": {k: round(v, 3) for k, v in seconds.items()}}
-    log.debug("delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement from "
-              "min dihedral %.2f deg, %d nodes relocated (%.2f s)", len(boundary), seconds["surface"],
-              len(tets), len(steiner), seconds["connect"], before, moves, seconds["improve"])
+    stats = {
+        "boundary_triangles": len(boundary),
+        "crowded_surface_nodes_dropped": len(surface.dropped),
+        "curve_nodes_added": int((packing.level == CURVE).sum() - (packing_in.level == CURVE).sum()),
+        "patch_nodes_added": int((packing.level == PATCH).sum() - (packing_in.level == PATCH).sum()),
+        "steiner_points": len(steiner),
+        "hull_tets": hull_tets,
+        "outside_tets_dropped": hull_tets - len(tets),
+        "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
+        "min_dihedral_before_improvement": before,
+        "relocated_nodes": moves,
+        "boundary_slivers_removed": peeled,
+        "nodes_collapsed": collapsed,
+        "faces_swapped": repair.swapped,
+        "seconds": {k: round(v, 3) for k, v in seconds.items()},
+    }
+    log.debug(
+        "delaunay: %d boundary triangles (%.2f s), %d tets, %d Steiner points (%.2f s), improvement from "
+        "min dihedral %.2f deg, %d nodes relocated (%.2f s)",
+        len(boundary),
+        seconds["surface"],
+        len(tets),
+        len(steiner),
+        seconds["connect"],
+        before,
+        moves,
+        seconds["improve"],
+    )
     order = np.argsort(patch, kind="stable")
     return TetMesh(points, tets, level, entity, stats, boundary[order], patch[order], bubble)
 
@@ -140,9 +172,11 @@ class _Repair:
     def __call__(self, points, tets, boundary, patch):
         for _ in range(REPAIR_ROUNDS):
             tets, boundary, patch, peeled = peel_boundary_slivers(
-                points, tets, boundary, patch, FLOOR, self.removable, self.on_surface, self.tolerance)
+                points, tets, boundary, patch, FLOOR, self.removable, self.on_surface, self.tolerance
+            )
             tets, boundary, patch, collapsed = collapse_bad_nodes(
-                points, tets, boundary, patch, FLOOR, self.collapsible, self.on_surface, self.tolerance)
+                points, tets, boundary, patch, FLOOR, self.collapsible, self.on_surface, self.tolerance
+            )
             tets, swapped = swap_bad_faces(points, tets, FLOOR)
             self.peeled += peeled
             self.collapsed += collapsed
@@ -154,9 +188,11 @@ class _Repair:
 
 def _on_surface(geometry):
     """points -> (their distances to the input surface, its outward unit normals at the closest points)."""
+
     def at(points):
         _, distance, face = geometry.closest_point(points)
         return distance, geometry.mesh.face_normals[face]
+
     return at
 
 

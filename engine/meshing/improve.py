@@ -40,6 +40,7 @@ solid and sizes (min dihedral 13.7-15.7 deg, 1st percentile about 20 deg):
 A wider Gmsh threshold lets its swaps repair what single-node moves cannot (at 0.3 the
 relocation stalls short of 20 deg and takes three times longer).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -49,15 +50,15 @@ from ..mesh import FACES
 from ..topology import node_stars
 from .tetra import gmsh_session
 
-GMSH_THRESHOLD = 0.5        # Gmsh optimises tets with gamma below this
+GMSH_THRESHOLD = 0.5  # Gmsh optimises tets with gamma below this
 REGULAR_DIHEDRAL = 70.528779365509308
-TARGET = 20.0 / REGULAR_DIHEDRAL   # relocation works on tets with q below: min dihedral < 20 deg or radius ratio < 0.284
-FLOOR = min(10.0 / REGULAR_DIHEDRAL, 0.15)   # the quality every element must reach
+TARGET = 20.0 / REGULAR_DIHEDRAL  # relocation works on tets with q below: min dihedral < 20 deg or radius ratio < 0.284
+FLOOR = min(10.0 / REGULAR_DIHEDRAL, 0.15)  # the quality every element must reach
 RELOCATION_PASSES = 6
-RING = 7                    # the largest ring of tets around an edge that is retriangulated (42 ways)
-PEEL_ROUNDS = 8             # rounds of each repair: one can lay the next bad tet open
-CANDIDATES = 24             # perturbation directions per node and pass
-STEPS = np.array([0.04, 0.12, 0.25])   # perturbation lengths, x the mean edge length of the star
+RING = 7  # the largest ring of tets around an edge that is retriangulated (42 ways)
+PEEL_ROUNDS = 8  # rounds of each repair: one can lay the next bad tet open
+CANDIDATES = 24  # perturbation directions per node and pass
+STEPS = np.array([0.04, 0.12, 0.25])  # perturbation lengths, x the mean edge length of the star
 
 
 def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
@@ -69,7 +70,7 @@ def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
 
     gmsh_session()
     gmsh.option.setNumber("Mesh.OptimizeThreshold", GMSH_THRESHOLD)
-    gmsh.option.setNumber("Mesh.Renumber", 0)    # keep our node numbers as Gmsh's tags
+    gmsh.option.setNumber("Mesh.Renumber", 0)  # keep our node numbers as Gmsh's tags
     previous = gmsh.model.getCurrent() if gmsh.model.list() else None
     gmsh.model.add("fuzzymesh-optimize")
     try:
@@ -96,8 +97,9 @@ def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
     return points, np.asarray(nodes, dtype=np.int64).reshape(-1, 4) - 1
 
 
-def relocate(points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int = 0,
-             target: float | None = None) -> tuple[np.ndarray, int]:
+def relocate(
+    points: np.ndarray, tets: np.ndarray, slide: np.ndarray, seed: int = 0, target: float | None = None
+) -> tuple[np.ndarray, int]:
     """Move nodes of tets below the ``target`` quality (default TARGET) where that improves their stars.
 
     ``slide`` (n, 3) per node: NaN for a fixed node, zeros for a free one, a
@@ -137,8 +139,7 @@ def quality_below(points, tets, quality: float) -> np.ndarray:
     return _below_quality(np.ascontiguousarray(points, dtype=np.float64), tets, np.arange(len(tets)), quality)
 
 
-def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removable=None, surface=None,
-                          tolerance=None):
+def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removable=None, surface=None, tolerance=None):
     """Remove the tets below ``quality`` that lie flat between two boundary faces of one patch (or of
     two, across a smooth cut's edge: one with a ``removable`` node), and those that lie flat under three
     boundary faces around a ``removable`` node; in rounds, as a peel can lay the next flat tet open.
@@ -163,8 +164,9 @@ def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removab
     """
     removed = 0
     for _ in range(PEEL_ROUNDS):
-        tets, boundary, patch, count = _peel_round(points, tets, boundary, patch, quality, removable, surface,
-                                                   tolerance)
+        tets, boundary, patch, count = _peel_round(
+            points, tets, boundary, patch, quality, removable, surface, tolerance
+        )
         removed += count
         if not count:
             break
@@ -175,42 +177,43 @@ def _peel_round(points, tets, boundary, patch, quality, removable, surface, tole
     bad = np.flatnonzero(quality_below(points, tets, quality))
     if not len(bad):
         return tets, boundary, patch, 0
-    bad = bad[np.argsort(min_dihedrals(points, tets[bad]), kind="stable")]    # the worst first
+    bad = bad[np.argsort(min_dihedrals(points, tets[bad]), kind="stable")]  # the worst first
     faces = {tuple(sorted(f)): k for k, f in enumerate(boundary.tolist())}
     edges = {}
     for f in boundary.tolist():
         for a, b in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0])):
             edges[(min(a, b), max(a, b))] = edges.get((min(a, b), max(a, b)), 0) + 1
     degree = np.bincount(boundary.ravel(), minlength=len(points))
-    proposals = []                                        # (tet, removed faces, new faces, new patch, flip, apex)
+    proposals = []  # (tet, removed faces, new faces, new patch, flip, apex)
     for t in bad:
-        own = tets[t][FACES]                              # outward faces of the tet
+        own = tets[t][FACES]  # outward faces of the tet
         on_boundary = [faces.get(tuple(sorted(f))) for f in own.tolist()]
         hits = [k for k in on_boundary if k is not None]
         if len(hits) == 3 and removable is not None:
             opposite = [k is None for k in on_boundary].index(True)
-            apex = tets[t][opposite]                      # the node all three boundary faces share
+            apex = tets[t][opposite]  # the node all three boundary faces share
             if removable[apex] and degree[apex] == 3:
                 proposals.append((t, hits, own[opposite][None, ::-1], np.bincount(patch[hits]).argmax(), None, apex))
             continue
         if len(hits) != 2:
             continue
         shared = set(boundary[hits[0]].tolist()) & set(boundary[hits[1]].tolist())
-        across_cut = removable is not None and any(removable[v] for v in shared)   # a smooth cut's edge
+        across_cut = removable is not None and any(removable[v] for v in shared)  # a smooth cut's edge
         if len(shared) != 2 or (patch[hits[0]] != patch[hits[1]] and not across_cut):
             continue
         flipped = tuple(sorted(set(tets[t].tolist()) - shared))
         if edges.get(flipped, 0):
             continue
-        inner = own[[k is None for k in on_boundary]][:, ::-1]    # reversed: outward for the remaining mesh
+        inner = own[[k is None for k in on_boundary]][:, ::-1]  # reversed: outward for the remaining mesh
         proposals.append((t, hits, inner, patch[hits[0]], (tuple(sorted(shared)), flipped), None))
     if surface is not None and proposals:
-        ok = _stays_on_surface(points, surface, tolerance, [boundary[p[1]] for p in proposals],
-                               [p[2] for p in proposals])
+        ok = _stays_on_surface(
+            points, surface, tolerance, [boundary[p[1]] for p in proposals], [p[2] for p in proposals]
+        )
         proposals = [p for p, keep in zip(proposals, ok) if keep]
     drop, gone, added, added_patch = [], set(), [], []
     for t, hits, new, new_patch, flip, apex in proposals:
-        if gone & set(hits):                              # a face this round already removed
+        if gone & set(hits):  # a face this round already removed
             continue
         if flip is not None:
             shared, flipped = flip
@@ -250,16 +253,16 @@ def _stays_on_surface(points, surface, tolerance, old, new) -> np.ndarray:
 
     distance, normal = surface(np.vstack([samples(old), samples(new)]).reshape(-1, 3))
     allowed = np.zeros(count)
-    np.maximum.at(allowed, old_owner, distance[:4 * len(old)].reshape(-1, 4).max(axis=1))
+    np.maximum.at(allowed, old_owner, distance[: 4 * len(old)].reshape(-1, 4).max(axis=1))
     if tolerance is not None:
         smallest = np.full(count, np.inf)
         np.minimum.at(smallest, new_owner, tolerance[new].min(axis=1))
         np.maximum(allowed, smallest, out=allowed)
     far = np.zeros(count)
-    np.maximum.at(far, new_owner, distance[4 * len(old):].reshape(-1, 4).max(axis=1))
+    np.maximum.at(far, new_owner, distance[4 * len(old) :].reshape(-1, 4).max(axis=1))
     corners = points[new]
     outward = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    agree = np.einsum("ij,ij->i", outward, normal[4 * len(old):].reshape(-1, 4, 3)[:, 0]) > 0
+    agree = np.einsum("ij,ij->i", outward, normal[4 * len(old) :].reshape(-1, 4, 3)[:, 0]) > 0
     facing = np.ones(count, bool)
     np.logical_and.at(facing, new_owner, agree)
     return facing & (far <= allowed)
@@ -281,8 +284,9 @@ def collapse_bad_nodes(points, tets, boundary, patch, quality: float, collapsibl
     left unused (``tetra.compact`` drops it). In rounds; returns (tets, boundary, patch, collapsed count)."""
     total = 0
     for _ in range(PEEL_ROUNDS):
-        tets, boundary, patch, count = _collapse_round(points, tets, boundary, patch, quality, collapsible, surface,
-                                                       tolerance)
+        tets, boundary, patch, count = _collapse_round(
+            points, tets, boundary, patch, quality, collapsible, surface, tolerance
+        )
         total += count
         if not count:
             break
@@ -314,11 +318,11 @@ def _collapse_round(points, tets, boundary, patch, quality, collapsible, surface
         for v in tets[t]:
             if not collapsible[v]:
                 continue
-            star_v = star_tets[star_start[v]:star_start[v + 1]]
-            for w in np.unique(tets[star_v]):             # into any neighbour
+            star_v = star_tets[star_start[v] : star_start[v + 1]]
+            for w in np.unique(tets[star_v]):  # into any neighbour
                 if w == v or (on_boundary[v] and edges.get((min(v, w), max(v, w)), 0) != 2):
                     continue
-                star_w = star_tets[star_start[w]:star_start[w + 1]]
+                star_w = star_tets[star_start[w] : star_start[w + 1]]
                 if touched[star_v].any() or touched[star_w].any():
                     continue
                 option = _collapse(points, tets, boundary, faces, edges, star_v, star_w, v, w)
@@ -327,9 +331,13 @@ def _collapse_round(points, tets, boundary, patch, quality, collapsible, surface
         options.sort(key=lambda o: -o["worst"])
         if surface is not None and any(len(o["new_faces"]) for o in options):
             moving = [o for o in options if len(o["new_faces"])]
-            ok = _stays_on_surface(points, surface, tolerance,
-                                   [boundary[o["removed_faces"] + o["old_faces"]] for o in moving],
-                                   [o["new_faces"] for o in moving])
+            ok = _stays_on_surface(
+                points,
+                surface,
+                tolerance,
+                [boundary[o["removed_faces"] + o["old_faces"]] for o in moving],
+                [o["new_faces"] for o in moving],
+            )
             rejected = {id(o) for o, keep in zip(moving, ok) if not keep}
             options = [o for o in options if id(o) not in rejected]
         if not options:
@@ -403,9 +411,18 @@ def _collapse(points, tets, boundary, faces, edges, star_v, star_w, v, w):
             changes[key] = changes.get(key, edges.get(key, 0)) + 1
     if any(c not in (0, 2) for c in changes.values()):
         return None
-    return {"worst": float(new_q.min()), "star_v": star_v, "star_w": star_w, "changed": star_v[~has_w],
-            "rows": rows, "gone": star_v[has_w], "removed_faces": removed, "old_faces": old_faces,
-            "new_faces": np.array(new_faces, dtype=boundary.dtype).reshape(-1, 3), "edges": changes}
+    return {
+        "worst": float(new_q.min()),
+        "star_v": star_v,
+        "star_w": star_w,
+        "changed": star_v[~has_w],
+        "rows": rows,
+        "gone": star_v[has_w],
+        "removed_faces": removed,
+        "old_faces": old_faces,
+        "new_faces": np.array(new_faces, dtype=boundary.dtype).reshape(-1, 3),
+        "edges": changes,
+    }
 
 
 def swap_bad_faces(points, tets, quality: float):
@@ -432,22 +449,27 @@ def _swap_round(points, tets, quality):
     star_start, star_tets = node_stars(tets, len(points))
 
     def star(v):
-        return star_tets[star_start[v]:star_start[v + 1]]
+        return star_tets[star_start[v] : star_start[v + 1]]
 
     touched = np.zeros(len(tets), bool)
     added, gone = [], []
     for t in bad:
         if touched[t]:
             continue
-        options = []                                      # (worst new quality, replaced tets, new rows)
+        options = []  # (worst new quality, replaced tets, new rows)
         for k in range(4):
-            face = tets[t][FACES[k]]                      # outward from t
+            face = tets[t][FACES[k]]  # outward from t
             neighbour = np.setdiff1d(np.intersect1d(np.intersect1d(star(face[0]), star(face[1])), star(face[2])), [t])
             if len(neighbour) != 1:
-                continue                                  # a boundary face
+                continue  # a boundary face
             apex = tets[neighbour[0]][~np.isin(tets[neighbour[0]], face)][0]
-            rows = np.array([[tets[t][k], face[1], face[2], apex], [face[0], tets[t][k], face[2], apex],
-                             [face[0], face[1], tets[t][k], apex]])
+            rows = np.array(
+                [
+                    [tets[t][k], face[1], face[2], apex],
+                    [face[0], tets[t][k], face[2], apex],
+                    [face[0], face[1], tets[t][k], apex],
+                ]
+            )
             options.append((np.array([t, neighbour[0]]), rows))
         for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
             a, b = tets[t][i], tets[t][j]
@@ -456,11 +478,20 @@ def _swap_round(points, tets, quality):
                 continue
             polygon = _ring(tets[ring], a, b)
             if polygon is None:
-                continue                                  # a boundary edge
+                continue  # a boundary edge
             for triangles in _triangulations(len(polygon)):
                 tri = polygon[np.array(triangles)]
-                options.append((ring, np.vstack([np.column_stack([tri[:, ::-1], np.full(len(tri), a)]),
-                                                 np.column_stack([tri, np.full(len(tri), b)])])))
+                options.append(
+                    (
+                        ring,
+                        np.vstack(
+                            [
+                                np.column_stack([tri[:, ::-1], np.full(len(tri), a)]),
+                                np.column_stack([tri, np.full(len(tri), b)]),
+                            ]
+                        ),
+                    )
+                )
         best = None
         for replaced, rows in options:
             if touched[replaced].any():
@@ -584,15 +615,20 @@ def _shape(a, b, c, d):
     n2 = _cross(wx, wy, wz, ux, uy, uz)
     n3 = _cross(ux, uy, uz, vx, vy, vz)
     normals = (n0, n1, n2, n3)
-    lengths = (np.sqrt(n0[0] ** 2 + n0[1] ** 2 + n0[2] ** 2), np.sqrt(n1[0] ** 2 + n1[1] ** 2 + n1[2] ** 2),
-               np.sqrt(n2[0] ** 2 + n2[1] ** 2 + n2[2] ** 2), np.sqrt(n3[0] ** 2 + n3[1] ** 2 + n3[2] ** 2))
+    lengths = (
+        np.sqrt(n0[0] ** 2 + n0[1] ** 2 + n0[2] ** 2),
+        np.sqrt(n1[0] ** 2 + n1[1] ** 2 + n1[2] ** 2),
+        np.sqrt(n2[0] ** 2 + n2[1] ** 2 + n2[2] ** 2),
+        np.sqrt(n3[0] ** 2 + n3[1] ** 2 + n3[2] ** 2),
+    )
     largest = -1.0
     for i in range(4):
         for j in range(i + 1, 4):
-            cosine = -(normals[i][0] * normals[j][0] + normals[i][1] * normals[j][1]
-                       + normals[i][2] * normals[j][2]) / (lengths[i] * lengths[j])
+            cosine = -(
+                normals[i][0] * normals[j][0] + normals[i][1] * normals[j][1] + normals[i][2] * normals[j][2]
+            ) / (lengths[i] * lengths[j])
             largest = max(largest, cosine)
-    area2 = lengths[0] + lengths[1] + lengths[2] + lengths[3]        # twice the surface area
+    area2 = lengths[0] + lengths[1] + lengths[2] + lengths[3]  # twice the surface area
     r_in = six_volume / area2
     uu, vv, ww = ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz
     wu = _cross(wx, wy, wz, ux, uy, uz)
@@ -638,7 +674,7 @@ def _star_quality(points, tets, star, node, position):
 def _relocate_nodes(points, tets, star_start, star_tets, nodes, slide, directions, steps):
     moved = 0
     for node in nodes:
-        star = star_tets[star_start[node]:star_start[node + 1]]
+        star = star_tets[star_start[node] : star_start[node + 1]]
         here = points[node].copy()
         normal = slide[node]
         best = _star_quality(points, tets, star, node, here)

@@ -10,6 +10,7 @@ decided exactly, without tolerances: the surface's winding tells on which side
 of every chain edge its patch lies, and that side is flooded across the
 unconstrained edges. Triangles come out oriented outward.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,32 +21,32 @@ from scipy import sparse
 from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
-from ..features import conformal_map, describe
 from ..errors import GeometryError
+from ..features import conformal_map, describe
 from ..packing import CORNER, CURVE, PATCH, Packing
 
-SEAM_LAYERS = 4   # node layers copied across the seam of a full cylinder (Delaunay is local)
-SEAM_TRIES = 4    # seams tried on a full cylinder, each SEAM_SHIFT of a turn on from the last
+SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
+SEAM_TRIES = 4  # seams tried on a full cylinder, each SEAM_SHIFT of a turn on from the last
 SEAM_SHIFT = 0.381966
-CROWDING = 0.25   # a patch node nearer than this x h to its patch's border is left out, ...
+CROWDING = 0.25  # a patch node nearer than this x h to its patch's border is left out, ...
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
-HOLE = 1.0        # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
+HOLE = 1.0  # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
-MIN_GAP = 0.5     # no node is added nearer than this x h to another
-STRAY_GAP = 0.2   # ... but an input vertex the triangles pass far from (a drill point's tip) down to this x h
-NO_BUBBLE = -1    # the bubble id of a node the mesher adds
-ON_EDGE = 1e-9    # barycentric roundoff within which a point on a chart's border lies on its triangle
+MIN_GAP = 0.5  # no node is added nearer than this x h to another
+STRAY_GAP = 0.2  # ... but an input vertex the triangles pass far from (a drill point's tip) down to this x h
+NO_BUBBLE = -1  # the bubble id of a node the mesher adds
+ON_EDGE = 1e-9  # barycentric roundoff within which a point on a chart's border lies on its triangle
 
 
 @dataclass
 class BoundaryTriangulation:
     """Outward triangles on the solid's surface, indices into the packing's nodes."""
 
-    triangles: np.ndarray   # (t, 3) int64
-    patch: np.ndarray       # (t,) patch index of each triangle
-    dropped: np.ndarray     # patch nodes left out because they crowd a feature curve
-    nodes: Packing          # the packing's nodes, and curve nodes added where chain edges were split
+    triangles: np.ndarray  # (t, 3) int64
+    patch: np.ndarray  # (t,) patch index of each triangle
+    dropped: np.ndarray  # patch nodes left out because they crowd a feature curve
+    nodes: Packing  # the packing's nodes, and curve nodes added where chain edges were split
 
 
 def curve_chains(packing, features) -> dict[int, np.ndarray]:
@@ -65,8 +66,9 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
         ordered = nodes[np.argsort(curve.parameter(packing.points[nodes]), kind="stable")]
         start = corner_at_vertex.get(int(curve.vertices[0]))
         end = None if curve.closed else corner_at_vertex.get(int(curve.vertices[-1]))
-        chains[index] = np.concatenate([[start] if start is not None else [], ordered,
-                                        [end] if end is not None else []]).astype(np.int64)
+        chains[index] = np.concatenate(
+            [[start] if start is not None else [], ordered, [end] if end is not None else []]
+        ).astype(np.int64)
     return chains
 
 
@@ -104,7 +106,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
     """
     sides = curve_sides(geometry, features)
     nodes = packing
-    for _ in range(SPLIT_ROUNDS):   # chords that stray from their curve are split first
+    for _ in range(SPLIT_ROUNDS):  # chords that stray from their curve are split first
         chains = curve_chains(nodes, features)
         coarse = _coarse_chain_edges(nodes, features, chains)
         if len(coarse) == 0:
@@ -121,12 +123,24 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             if len(members) < 3:
                 continue
             tri, crowded, lost, new_points, new_radius = _triangulate_patch(
-                patch, geometry, nodes.points[members], nodes.radius[members], np.searchsorted(members, edges),
-                nodes.level[members] == PATCH)
+                patch,
+                geometry,
+                nodes.points[members],
+                nodes.radius[members],
+                np.searchsorted(members, edges),
+                nodes.level[members] == PATCH,
+            )
             index = np.concatenate([members, next_node + np.arange(len(new_points))])
             next_node += len(new_points)
-            added.append(Packing(new_points, np.full(len(new_points), PATCH, np.int8), np.full(len(new_points), p),
-                                 new_radius, ids=np.full(len(new_points), NO_BUBBLE)))
+            added.append(
+                Packing(
+                    new_points,
+                    np.full(len(new_points), PATCH, np.int8),
+                    np.full(len(new_points), p),
+                    new_radius,
+                    ids=np.full(len(new_points), NO_BUBBLE),
+                )
+            )
             triangles.append(index[tri])
             patch_of.append(np.full(len(tri), p))
             dropped.append(members[crowded])
@@ -140,9 +154,12 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
         raise RuntimeError(f"{len(missed)} feature-curve edges still missing from the surface triangulation")
     triangles = np.concatenate(triangles).astype(np.int64) if triangles else np.zeros((0, 3), np.int64)
     check_closed(triangles)
-    return BoundaryTriangulation(triangles, np.concatenate(patch_of) if patch_of else np.zeros(0, np.int64),
-                                 np.concatenate(dropped).astype(np.int64) if dropped else np.zeros(0, np.int64),
-                                 nodes)
+    return BoundaryTriangulation(
+        triangles,
+        np.concatenate(patch_of) if patch_of else np.zeros(0, np.int64),
+        np.concatenate(dropped).astype(np.int64) if dropped else np.zeros(0, np.int64),
+        nodes,
+    )
 
 
 def _border_edges(p, chains, sides, features) -> np.ndarray:
@@ -152,8 +169,11 @@ def _border_edges(p, chains, sides, features) -> np.ndarray:
         left, right = sides[index]
         if p not in (left, right) or len(chain) < 2:
             continue
-        pairs = np.column_stack([chain, np.roll(chain, -1)]) if features.curves[index].closed \
+        pairs = (
+            np.column_stack([chain, np.roll(chain, -1)])
+            if features.curves[index].closed
             else np.column_stack([chain[:-1], chain[1:]])
+        )
         if p == left:
             edges.append(pairs)
         if p == right:
@@ -168,10 +188,12 @@ def _coarse_chain_edges(nodes, features, chains) -> np.ndarray:
         curve = features.curves[index]
         if len(chain) < 2:
             continue
-        ends = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        ends = (
+            np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        )
         s = curve.parameter(nodes.points[chain])
-        knots = curve.arc_length[1:-1]          # the curve's own vertices between its ends
-        if curve.closed:    # the closing edge runs past the end, to the first node one turn on
+        knots = curve.arc_length[1:-1]  # the curve's own vertices between its ends
+        if curve.closed:  # the closing edge runs past the end, to the first node one turn on
             knots = np.concatenate([curve.arc_length[:-1], curve.arc_length[:-1] + curve.length])
             s = np.concatenate([s, [s[0] + curve.length]])
         edge = np.searchsorted(s, knots, side="right") - 1
@@ -195,19 +217,26 @@ def _split_chain_edges(nodes, features, chains, pairs):
     points, entity, radius = [], [], []
     for index, chain in chains.items():
         curve = features.curves[index]
-        ends = np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        ends = (
+            np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
+        )
         hit = np.array([tuple(sorted(pair)) in wanted for pair in ends.tolist()], dtype=bool)
         if not hit.any():
             continue
         s = curve.parameter(nodes.points[ends[hit].ravel()]).reshape(-1, 2)
-        if curve.closed:   # the edge that closes the loop runs past the start
+        if curve.closed:  # the edge that closes the loop runs past the start
             s[:, 1] = np.where(s[:, 1] <= s[:, 0], s[:, 1] + curve.length, s[:, 1])
         points.append(curve.point_at(s.mean(axis=1)))
         entity.append(np.full(hit.sum(), index))
         radius.append(nodes.radius[ends[hit]].mean(axis=1))
     count = sum(map(len, entity))
-    added = Packing(np.vstack(points), np.full(count, CURVE, np.int8), np.concatenate(entity).astype(np.int64),
-                    np.concatenate(radius), ids=np.full(count, NO_BUBBLE))
+    added = Packing(
+        np.vstack(points),
+        np.full(count, CURVE, np.int8),
+        np.concatenate(entity).astype(np.int64),
+        np.concatenate(radius),
+        ids=np.full(count, NO_BUBBLE),
+    )
     return Packing.concatenate([nodes, added], nodes.stats)
 
 
@@ -232,10 +261,9 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
             break
         added_uv, added_radius = np.vstack([added_uv, new_uv]), np.concatenate([added_radius, new_radius])
     kept_added = np.setdiff1d(np.arange(len(added_uv)), crowded - len(uv))
-    renumber = np.arange(len(all_uv))   # crowded added points are forgotten rather than dropped
+    renumber = np.arange(len(all_uv))  # crowded added points are forgotten rather than dropped
     renumber[len(uv) + kept_added] = len(uv) + np.arange(len(kept_added))
-    return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv[kept_added]),
-            added_radius[kept_added])
+    return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv[kept_added]), added_radius[kept_added])
 
 
 def _triangulate_chart(chart, uv, radius, constraints, droppable):
@@ -246,7 +274,9 @@ def _triangulate_chart(chart, uv, radius, constraints, droppable):
         return _triangulate_strip(chart, uv, radius, constraints, droppable)
     for attempt in range(SEAM_TRIES):
         turned = uv.copy()
-        turned[:, 0] = np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
+        turned[:, 0] = (
+            np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
+        )
         tri, crowded, lost = _triangulate_strip(chart, turned, radius, constraints, droppable)
         if len(lost) or _paired(tri, constraints):
             break
@@ -271,11 +301,11 @@ def _triangulate_strip(chart, uv, radius, constraints, droppable):
     crowded = np.unique(original[_crowding(extended, edges, droppable[original], 2 * radius[original])])
     if len(crowded):
         rows = ~np.isin(original, crowded)
-        edges = (np.cumsum(rows) - 1)[edges]   # constrained edges join curve nodes, which stay
+        edges = (np.cumsum(rows) - 1)[edges]  # constrained edges join curve nodes, which stay
         extended, original = extended[rows], original[rows]
     tri = _delaunay(extended)
     inside, lost = _inside_regions(tri, edges)
-    if chart.turn is not None:   # one copy of each triangle: the one whose centroid lies in the unrolled turn
+    if chart.turn is not None:  # one copy of each triangle: the one whose centroid lies in the unrolled turn
         u = extended[tri, 0].mean(axis=1)
         inside &= (u >= -chart.turn / 2) & (u < chart.turn / 2)
     return original[tri[inside]], crowded, original[lost].reshape(-1, 2)
@@ -290,15 +320,17 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     else the middle of its longest edge (the centroid when that edge is on the border); one per hole, none near
     a node or the border."""
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
-    if chart.turn is not None:   # a triangle across the seam: its corners within half a turn of the first
-        b, c = (x - np.column_stack([chart.turn * np.round((x[:, 0] - a[:, 0]) / chart.turn), 0 * x[:, 1]])
-                for x in (b, c))
+    if chart.turn is not None:  # a triangle across the seam: its corners within half a turn of the first
+        b, c = (
+            x - np.column_stack([chart.turn * np.round((x[:, 0] - a[:, 0]) / chart.turn), 0 * x[:, 1]]) for x in (b, c)
+        )
     la, lb, lc = (np.linalg.norm(b - c, axis=1), np.linalg.norm(c - a, axis=1), np.linalg.norm(a - b, axis=1))
     double_area = _cross2(b - a, c - a)
     h = 2 * radius[tri].mean(axis=1)
     ba, ca = b - a, c - a
-    centre = a + np.column_stack([ca[:, 1] * (ba ** 2).sum(1) - ba[:, 1] * (ca ** 2).sum(1),
-                                  ba[:, 0] * (ca ** 2).sum(1) - ca[:, 0] * (ba ** 2).sum(1)]) / (2 * double_area[:, None])
+    centre = a + np.column_stack(
+        [ca[:, 1] * (ba**2).sum(1) - ba[:, 1] * (ca**2).sum(1), ba[:, 0] * (ca**2).sum(1) - ca[:, 0] * (ba**2).sum(1)]
+    ) / (2 * double_area[:, None])
     wb, wc = _cross2(centre - a, c - a) / double_area, _cross2(b - a, centre - a) / double_area
     in_triangle = (wb >= 0) & (wc >= 0) & (wb + wc <= 1)
     # else the middle of the longest edge, unless it is a border edge: away from the border and the nodes
@@ -309,7 +341,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     point = np.where(in_triangle[:, None], centre, np.where(on_border[:, None], (a + b + c) / 3, middle))
     # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
     badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
-    stray = np.zeros(len(point), bool)    # which points are input vertices (_stray_vertices)
+    stray = np.zeros(len(point), bool)  # which points are input vertices (_stray_vertices)
     if chart.kind != "plane":
         lifted = chart.lift(point)
         corners = chart.lift(np.vstack([a, b, c])).reshape(3, -1, 3)
@@ -317,11 +349,14 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
         deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
         badness = np.fmax(badness, deviation / (DEVIATION * h))
-        badness[np.isnan(lifted[:, 0])] = 0.0     # off a conformal chart's triangles: nowhere to put a node
-        if chart.kind == "conformal":   # input vertices the triangles pass far from (a drill point's tip)
+        badness[np.isnan(lifted[:, 0])] = 0.0  # off a conformal chart's triangles: nowhere to put a node
+        if chart.kind == "conformal":  # input vertices the triangles pass far from (a drill point's tip)
             vertex_uv, vertex_badness, vertex_h = _stray_vertices(chart, uv, tri, corners[0], normal, h)
-            point, badness, h = (np.concatenate([point, vertex_uv]), np.concatenate([badness, vertex_badness]),
-                                 np.concatenate([h, vertex_h]))
+            point, badness, h = (
+                np.concatenate([point, vertex_uv]),
+                np.concatenate([badness, vertex_badness]),
+                np.concatenate([h, vertex_h]),
+            )
             stray = np.r_[stray, np.ones(len(vertex_uv), bool)]
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
@@ -329,18 +364,20 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     big = big[np.argsort(-badness[big], kind="stable")]
     point, spacing, stray = point[big], h[big], stray[big]
     present = uv[np.setdiff1d(np.arange(len(uv)), crowded)]
-    if chart.turn is not None:   # back into the turn; nodes across the seam count as neighbours
+    if chart.turn is not None:  # back into the turn; nodes across the seam count as neighbours
         point[:, 0] -= chart.turn * np.round(point[:, 0] / chart.turn)
         present = np.vstack([present, present + [chart.turn, 0.0], present - [chart.turn, 0.0]])
         # an edge across the seam spans the whole strip here: not a border to keep off
         constraints = constraints[np.abs(np.diff(uv[constraints, 0], axis=1)[:, 0]) < chart.turn / 2]
     keep = cKDTree(present).query(point)[0] > np.where(stray, STRAY_GAP, MIN_GAP) * spacing
-    keep[_crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep],
-                   np.r_[2 * radius, spacing]) - len(uv)] = False
+    keep[
+        _crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep], np.r_[2 * radius, spacing])
+        - len(uv)
+    ] = False
     point, spacing = point[keep], spacing[keep]
     chosen = np.ones(len(point), bool)
     neighbours = cKDTree(point).query_ball_point(point, MIN_GAP * spacing)
-    for i, near in enumerate(neighbours):    # one point per hole: the worst triangle's, which come first
+    for i, near in enumerate(neighbours):  # one point per hole: the worst triangle's, which come first
         if chosen[i]:
             chosen[[j for j in near if j > i]] = False
     return point[chosen], spacing[chosen] / 2
@@ -354,7 +391,7 @@ def _stray_vertices(chart, uv, tri, corner, normal, h):
     faces = np.ascontiguousarray(tri, dtype=np.int64)
     query = np.ascontiguousarray(np.column_stack([chart.vertex_uv, np.zeros(len(chart.vertex_uv))]))
     squared, face, _ = igl.point_mesh_squared_distance(query, flat, faces)
-    inside = np.flatnonzero(squared <= chart.flat_tolerance ** 2)
+    inside = np.flatnonzero(squared <= chart.flat_tolerance**2)
     face = face[inside]
     off = np.abs(np.einsum("ij,ij->i", chart.vertices[inside] - corner[face], normal[face]))
     badness = np.nan_to_num(off / (DEVIATION * h[face]))
@@ -395,17 +432,21 @@ class PatchChart:
         if patch.planar:
             e1 = np.cross(patch.normal, np.eye(3)[np.argmin(np.abs(patch.normal))])
             e1 /= np.linalg.norm(e1)
-            self.kind, self.origin, self.frame = "plane", patch.centroid, np.column_stack([e1, np.cross(patch.normal, e1)])
+            self.kind, self.origin, self.frame = (
+                "plane",
+                patch.centroid,
+                np.column_stack([e1, np.cross(patch.normal, e1)]),
+            )
         elif patch.cylinder is not None:
             c = patch.cylinder
             e1 = np.cross(c.axis, np.eye(3)[np.argmin(np.abs(c.axis))])
             e1 /= np.linalg.norm(e1)
             self.kind, self.cylinder, self.e1, self.e2 = "cylinder", c, e1, np.cross(c.axis, e1)
-            self.sign = -1.0 if c.concave else 1.0    # outward normal -e_r on a concave patch: mirror
-            self.middle = -np.pi                      # the seam's angle
+            self.sign = -1.0 if c.concave else 1.0  # outward normal -e_r on a concave patch: mirror
+            self.middle = -np.pi  # the seam's angle
             if c.full_turn:
                 self.turn = 2 * np.pi * c.radius
-            else:   # the largest empty sector of the patch goes to the seam
+            else:  # the largest empty sector of the patch goes to the seam
                 angles = np.sort(self._angle(self.vertices))
                 gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
                 k = int(np.argmax(gaps))
@@ -414,7 +455,7 @@ class PatchChart:
             self.kind = "conformal"
             self.vertex_uv = self._conformal_map(patch, geometry.source)
             self.flat = np.ascontiguousarray(np.column_stack([self.vertex_uv, np.zeros(len(self.vertex_uv))]))
-            self.flat_tree = igl.AABB()           # the chart's triangles in the plane z = 0: exact point location
+            self.flat_tree = igl.AABB()  # the chart's triangles in the plane z = 0: exact point location
             self.flat_tree.init(self.flat, self.faces)
             self.flat_tolerance = ON_EDGE * float(np.linalg.norm(np.ptp(self.vertex_uv, axis=0)))
 
@@ -429,7 +470,9 @@ class PatchChart:
             c = self.cylinder
             theta = np.angle(np.exp(1j * (self._angle(points) - self.middle - np.pi)))
             return np.column_stack([self.sign * c.radius * theta, (points - c.point) @ c.axis])
-        _, face, closest = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(points, dtype=np.float64))
+        _, face, closest = self.tree.squared_distance(
+            self.vertices, self.faces, np.ascontiguousarray(points, dtype=np.float64)
+        )
         corners = self.vertices[self.faces[face]]
         weights = igl.barycentric_coordinates(closest, *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
         return np.einsum("ij,ijk->ik", weights, self.vertex_uv[self.faces[face]])
@@ -441,8 +484,11 @@ class PatchChart:
         elif self.kind == "cylinder":
             c = self.cylinder
             theta = uv[:, 0] / (self.sign * c.radius) + self.middle + np.pi
-            x = (c.point + c.radius * (np.cos(theta)[:, None] * self.e1 + np.sin(theta)[:, None] * self.e2)
-                 + uv[:, 1:2] * c.axis)
+            x = (
+                c.point
+                + c.radius * (np.cos(theta)[:, None] * self.e1 + np.sin(theta)[:, None] * self.e2)
+                + uv[:, 1:2] * c.axis
+            )
         else:
             return self._lift_conformal(uv)
         _, _, closest = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(x))
@@ -456,7 +502,7 @@ class PatchChart:
             return out
         query = np.ascontiguousarray(np.column_stack([uv, np.zeros(len(uv))]), dtype=np.float64)
         squared, face, closest = self.flat_tree.squared_distance(self.flat, self.faces, query)
-        hit = squared <= self.flat_tolerance ** 2      # a border node's roundoff counts in
+        hit = squared <= self.flat_tolerance**2  # a border node's roundoff counts in
         corners = self.flat[self.faces[face[hit]]]
         weights = igl.barycentric_coordinates(closest[hit], *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
         weights = np.clip(weights, 0.0, None)
@@ -470,15 +516,19 @@ class PatchChart:
             return []
         half = self.turn / 2
         span = min(half, SEAM_LAYERS * 2 * radius.max())
-        return [(np.flatnonzero(uv[:, 0] < -half + span), np.array([self.turn, 0.0])),
-                (np.flatnonzero(uv[:, 0] >= half - span), np.array([-self.turn, 0.0]))]
+        return [
+            (np.flatnonzero(uv[:, 0] < -half + span), np.array([self.turn, 0.0])),
+            (np.flatnonzero(uv[:, 0] >= half - span), np.array([-self.turn, 0.0])),
+        ]
 
     def _conformal_map(self, patch, source) -> np.ndarray:
         uv = conformal_map(self.vertices, self.faces)
         if uv is None:
-            raise GeometryError(f"the smooth surface patch {describe(patch)} folds over or "
-                                "stretches when flattened", where=source,
-                                fix="lower geometry.feature_angle so that feature curves cut it")
+            raise GeometryError(
+                f"the smooth surface patch {describe(patch)} folds over or stretches when flattened",
+                where=source,
+                fix="lower geometry.feature_angle so that feature curves cut it",
+            )
         return uv
 
 
@@ -531,15 +581,17 @@ def _inside_regions(tri, constraints):
     and the constrained edges missing from ``tri`` (then nothing is flooded). An edge constrained in
     both directions (a sharp crease that ends inside the patch) stays an edge but tells no side."""
     n = int(max(tri.max(initial=0), constraints.max(initial=0))) + 1
-    half = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)   # directed edges, 3 per triangle
+    half = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)  # directed edges, 3 per triangle
     owner = np.repeat(np.arange(len(tri)), 3)
     key = half[:, 0] * n + half[:, 1]
     forward = np.isin(key, constraints[:, 0] * n + constraints[:, 1])
     backward = np.isin(key, constraints[:, 1] * n + constraints[:, 0])
-    crease = forward & backward        # a sharp crease that ends inside the patch: the patch on both sides
+    crease = forward & backward  # a sharp crease that ends inside the patch: the patch on both sides
     link_blocked = forward | backward
     forward, backward = forward & ~crease, backward & ~crease
-    lost = ~np.isin(constraints[:, 0] * n + constraints[:, 1], key) & ~np.isin(constraints[:, 1] * n + constraints[:, 0], key)
+    lost = ~np.isin(constraints[:, 0] * n + constraints[:, 1], key) & ~np.isin(
+        constraints[:, 1] * n + constraints[:, 0], key
+    )
     if lost.any():
         return np.zeros(len(tri), bool), constraints[lost]
     twin_key = half[:, 1] * n + half[:, 0]
@@ -565,5 +617,7 @@ def check_closed(triangles: np.ndarray) -> None:
     code = keys[:, 0] * n + keys[:, 1]
     twin = np.isin(keys[:, 1] * n + keys[:, 0], code)
     if np.any(counts != 1) or not np.all(twin):
-        raise RuntimeError(f"the boundary triangulation is not a closed 2-manifold: {int(np.sum(counts != 1))} "
-                           f"repeated and {int(np.sum(~twin))} unmatched directed edges")
+        raise RuntimeError(
+            f"the boundary triangulation is not a closed 2-manifold: {int(np.sum(counts != 1))} "
+            f"repeated and {int(np.sum(~twin))} unmatched directed edges"
+        )

@@ -1,4 +1,5 @@
 """Tetrahedralization kernels shared by the meshers: Gmsh's Delaunay, orientation, IN/OUT, ordering."""
+
 from __future__ import annotations
 
 import os
@@ -11,7 +12,7 @@ from .._numba import numba
 from ..mesh import FACES, signed_volumes
 from ..topology import find_face, node_stars
 
-FLAT = 1e-10   # |6 x volume| below this x (edge length)^3: a flat tetrahedron
+FLAT = 1e-10  # |6 x volume| below this x (edge length)^3: a flat tetrahedron
 
 
 def gmsh_session() -> None:
@@ -52,7 +53,7 @@ def tetrahedralize(points: np.ndarray, triangles: np.ndarray | None = None) -> t
 
     gmsh_session()
     faces = [] if triangles is None else (np.asarray(triangles, dtype=np.int64) + 1).ravel().tolist()
-    with quiet_stdout():   # HXT prints "Info : Recover Delaunay" whatever the verbosity
+    with quiet_stdout():  # HXT prints "Info : Recover Delaunay" whatever the verbosity
         tets, steiner = gmsh.algorithm.tetrahedralize(np.ascontiguousarray(points, dtype=float).ravel(), faces)
     return np.asarray(tets, dtype=np.int64).reshape(-1, 4) - 1, np.asarray(steiner, dtype=float).reshape(-1, 3)
 
@@ -78,8 +79,14 @@ def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarra
     """
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     start, star = node_stars(tets, len(points))
-    inside, conflicts = _inside_by_boundary(np.ascontiguousarray(points, dtype=np.float64), tets,
-                                            np.ascontiguousarray(boundary, dtype=np.int64), start, star, FACES)
+    inside, conflicts = _inside_by_boundary(
+        np.ascontiguousarray(points, dtype=np.float64),
+        tets,
+        np.ascontiguousarray(boundary, dtype=np.int64),
+        start,
+        star,
+        FACES,
+    )
     if conflicts:
         raise RuntimeError("a region of tetrahedra lies on both sides of the boundary")
     return inside
@@ -89,7 +96,7 @@ def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarra
 def _inside_by_boundary(points, tets, boundary, start, star, faces):
     m = len(tets)
     blocked = np.zeros((m, 4), np.bool_)
-    vote = np.zeros(m, np.int8)        # +1: behind a boundary triangle, -1: in front of one
+    vote = np.zeros(m, np.int8)  # +1: behind a boundary triangle, -1: in front of one
     for i in range(len(boundary)):
         a, b, c = boundary[i, 0], boundary[i, 1], boundary[i, 2]
         ab, ac = points[b] - points[a], points[c] - points[a]
@@ -101,7 +108,7 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
                 break
             blocked[t, k] = True
             side = np.dot(points[tets[t, k]] - points[a], normal)
-            scale = np.dot(normal, normal) ** 0.75     # ~ |ab|^3: a flat tet on a flat hull votes nothing
+            scale = np.dot(normal, normal) ** 0.75  # ~ |ab|^3: a flat tet on a flat hull votes nothing
             if side < -FLAT * scale:
                 vote[t] = 1
             elif side > FLAT * scale:
@@ -132,7 +139,7 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
                 stack[top] = s
                 top += 1
     inside = ~outside
-    for t in range(m):   # flat tets (HXT fills a flat hull face with them) are never inside
+    for t in range(m):  # flat tets (HXT fills a flat hull face with them) are never inside
         a, b, c, d = points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]
         ab = b - a
         if abs(np.dot(ab, np.cross(c - a, d - a))) <= FLAT * np.dot(ab, ab) ** 1.5:
@@ -147,7 +154,7 @@ def canonical(tets: np.ndarray) -> np.ndarray:
     depend on the nodes only (orientation is kept).
     """
     rows = _sorted_rows(np.ascontiguousarray(tets, dtype=np.int64))
-    if len(rows) and rows.max() < 2 ** 21:   # three nodes in one int64 key
+    if len(rows) and rows.max() < 2**21:  # three nodes in one int64 key
         order = np.lexsort((rows[:, 3], (rows[:, 0] << 42) | (rows[:, 1] << 21) | rows[:, 2]))
     else:
         order = np.lexsort(rows.T[::-1])
@@ -161,7 +168,7 @@ def _sorted_rows(tets):
     for t in range(len(out)):
         row = out[t]
         odd = False
-        for i in range(1, 4):       # insertion sort, counting swaps
+        for i in range(1, 4):  # insertion sort, counting swaps
             j = i
             while j > 0 and row[j - 1] > row[j]:
                 row[j - 1], row[j] = row[j], row[j - 1]

@@ -22,6 +22,7 @@ at the stable distance are longer than that distance (the nearest neighbour is t
 bubbles are packed at c < 1 times h (bench/size_calibration.py). The nodes' ``radius`` stays h / 2, the
 target size; the packer's own statistics (``nearest_over_r0``) measure against the bubble diameter.
 """
+
 from __future__ import annotations
 
 import logging
@@ -42,17 +43,17 @@ from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
 log = logging.getLogger(__name__)
 
 MASS = 1.0
-STIFFNESS = 1.0                  # k0, per unit of r0
-DAMPING_RATIO = 0.7              # of critical damping 2 sqrt(m k0)
-TIME_STEP = 0.5                  # in units of sqrt(m / k0): |lambda| dt <= 1.7 for a bubble pressed by all
-                                 # its neighbours at the stiffest spacing, inside RK4's stability bound 2.78
-SETTLE_STEPS = 8                 # steps after the last population-control round
-TOLERANCE = 2e-3                 # converged when every bubble moves less than this x h per step
+STIFFNESS = 1.0  # k0, per unit of r0
+DAMPING_RATIO = 0.7  # of critical damping 2 sqrt(m k0)
+TIME_STEP = 0.5  # in units of sqrt(m / k0): |lambda| dt <= 1.7 for a bubble pressed by all
+# its neighbours at the stiffest spacing, inside RK4's stability bound 2.78
+SETTLE_STEPS = 8  # steps after the last population-control round
+TOLERANCE = 2e-3  # converged when every bubble moves less than this x h per step
 NEIGHBOURS = {CURVE: 4, PATCH: 12, VOLUME: 16}
-SKIN = 0.3                       # a bubble that moved this x h since the last build is stale
-STALE_SHARE = 0.05               # rebuild the neighbour lists once this share of bubbles is stale
-REBUILD_EVERY = 50               # ... or after this many steps
-INSIDE_CHECK_EVERY = 5           # volume bubbles outside the solid go back to their last checked place
+SKIN = 0.3  # a bubble that moved this x h since the last build is stale
+STALE_SHARE = 0.05  # rebuild the neighbour lists once this share of bubbles is stale
+REBUILD_EVERY = 50  # ... or after this many steps
+INSIDE_CHECK_EVERY = 5  # volume bubbles outside the solid go back to their last checked place
 
 
 @dataclass
@@ -70,7 +71,7 @@ class LevelState:
         self.v = np.zeros_like(self.x)
 
 
-POPULATION = "population"   # the id of the rule file read: its rule bases 'delete' and 'insert', its packer settings
+POPULATION = "population"  # the id of the rule file read: its rule bases 'delete' and 'insert', its packer settings
 INPUTS = {"delete": "overlap", "insert": "vacancy"}
 
 
@@ -82,16 +83,25 @@ class PopulationControl:
         for name, variable in INPUTS.items():
             base = knowledge.rulebases[f"{POPULATION}.{name}"]
             if set(base.inputs) != {variable} or "action" not in base.extra:
-                raise KnowledgeError(f"rule base '{base.id}' must have the one input '{variable}' and an 'action'",
-                                     where=base.source, fix="keep the inputs and the action of the shipped "
-                                     "knowledge/population.yaml; change its terms, rules and thresholds")
+                raise KnowledgeError(
+                    f"rule base '{base.id}' must have the one input '{variable}' and an 'action'",
+                    where=base.source,
+                    fix="keep the inputs and the action of the shipped "
+                    "knowledge/population.yaml; change its terms, rules and thresholds",
+                )
             setattr(self, name, base)
         self.settings = knowledge.packer_settings[POPULATION]
         for file_id, source in {b.id.split(".")[0]: b.source for b in knowledge.rulebases.values()}.items():
             if file_id != POPULATION:
-                log.warning("%s: rule file '%s' is not read: the bubble packer reads the rule bases %s.delete and "
-                            "%s.insert; to replace them give this file 'id: %s' and 'overrides: true'", source,
-                            file_id, POPULATION, POPULATION, POPULATION)
+                log.warning(
+                    "%s: rule file '%s' is not read: the bubble packer reads the rule bases %s.delete and "
+                    "%s.insert; to replace them give this file 'id: %s' and 'overrides: true'",
+                    source,
+                    file_id,
+                    POPULATION,
+                    POPULATION,
+                    POPULATION,
+                )
 
     def decide(self, rule_base, inputs):
         outputs, firing = rule_base.evaluate(inputs)
@@ -108,13 +118,16 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
 
     rng = np.random.default_rng(seed)
     control = PopulationControl(knowledge or load_knowledge())
-    bubbles = _Scaled(sizing, control.settings["diameter"])   # bubble diameters d = c h
-    events: list[np.ndarray] = []     # EVENT rows, a block per control round
+    bubbles = _Scaled(sizing, control.settings["diameter"])  # bubble diameters d = c h
+    events: list[np.ndarray] = []  # EVENT rows, a block per control round
     timings, counters = {}, {"next_id": 0}
     corners = _corner_nodes(features, sizing)
     parts = [_with_ids(corners, counters)]
-    constraints = {CURVE: CurveConstraint(features), PATCH: PatchConstraint(geometry, features),
-                   VOLUME: VolumeConstraint(geometry)}
+    constraints = {
+        CURVE: CurveConstraint(features),
+        PATCH: PatchConstraint(geometry, features),
+        VOLUME: VolumeConstraint(geometry),
+    }
     initial_counts, starts = {}, [corners.points]
     for level in (CURVE, PATCH, VOLUME):
         start = time.perf_counter()
@@ -122,19 +135,26 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
         start_nodes = _initial(level, geometry, features, bubbles, frozen, rng, initial_density)
         initial_counts[LEVELS[level]] = len(start_nodes)
         starts.append(start_nodes.points)
-        state = LevelState(level, start_nodes.points, start_nodes.entity,
-                           _new_ids(len(start_nodes), counters), frozen.points)
+        state = LevelState(
+            level, start_nodes.points, start_nodes.entity, _new_ids(len(start_nodes), counters), frozen.points
+        )
         steps = _relax(state, constraints[level], geometry, bubbles, control, rng, events, counters)
         points = state.x
-        parts.append(Packing(points, np.full(len(points), level), state.entity, sizing(points) / 2,
-                             ids=state.ids))
+        parts.append(Packing(points, np.full(len(points), level), state.entity, sizing(points) / 2, ids=state.ids))
         timings[LEVELS[level]] = time.perf_counter() - start
-        log.info("packing %s: %d bubbles (started with %d) in %d steps, %.2f s", LEVELS[level], len(points),
-                 initial_counts[LEVELS[level]], steps, timings[LEVELS[level]])
+        log.info(
+            "packing %s: %d bubbles (started with %d) in %d steps, %.2f s",
+            LEVELS[level],
+            len(points),
+            initial_counts[LEVELS[level]],
+            steps,
+            timings[LEVELS[level]],
+        )
     packing = Packing.concatenate(parts)
     packing.events = np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray)
-    packing.stats = _statistics(packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings,
-                                packing.events)
+    packing.stats = _statistics(
+        packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings, packing.events
+    )
     return packing
 
 
@@ -158,7 +178,7 @@ def _initial(level, geometry, features, bubbles, frozen, rng, density):
         return _curve_nodes(features, scaled, existing=frozen.points)
     if level == PATCH:
         return _patch_nodes(geometry, features, scaled, frozen, rng)
-    return _volume_nodes(geometry, bubbles, frozen, rng, density=NODES_PER_H3 * bubbles.factor ** 3 * density)
+    return _volume_nodes(geometry, bubbles, frozen, rng, density=NODES_PER_H3 * bubbles.factor**3 * density)
 
 
 class _Scaled:
@@ -178,9 +198,9 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     interval, rounds = settings["control_interval"], settings["control_rounds"]
     damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
     k = NEIGHBOURS[state.level]
-    state.frozen = state.frozen[morton_order(state.frozen)]   # neighbours close in memory: fewer cache misses
+    state.frozen = state.frozen[morton_order(state.frozen)]  # neighbours close in memory: fewer cache misses
     step, built = 0, 0
-    neighbours, anchor, h = None, None, None   # set at the first step's rebuild
+    neighbours, anchor, h = None, None, None  # set at the first step's rebuild
     checked = state.x.copy()
     frame = None
     last_step = interval * rounds + SETTLE_STEPS
@@ -190,14 +210,22 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
             bar.update()
             if n == 0:
                 return 0
-            if neighbours is None or len(neighbours) != n or step - built >= REBUILD_EVERY or \
-                    np.count_nonzero(((state.x - anchor) ** 2).sum(axis=1) > (SKIN * h[:n]) ** 2) > STALE_SHARE * n:
+            if (
+                neighbours is None
+                or len(neighbours) != n
+                or step - built >= REBUILD_EVERY
+                or np.count_nonzero(((state.x - anchor) ** 2).sum(axis=1) > (SKIN * h[:n]) ** 2) > STALE_SHARE * n
+            ):
                 order = morton_order(state.x)
-                state.x, state.v, state.entity, state.ids = state.x[order], state.v[order], state.entity[order], \
-                    state.ids[order]
+                state.x, state.v, state.entity, state.ids = (
+                    state.x[order],
+                    state.v[order],
+                    state.entity[order],
+                    state.ids[order],
+                )
                 checked, frame = checked[order], None
                 everything = np.concatenate([state.x, state.frozen])
-                h = sizing(everything)   # bubbles move < SKIN h between rebuilds: their diameters are kept till then
+                h = sizing(everything)  # bubbles move < SKIN h between rebuilds: their diameters are kept till then
                 neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
             if frame is None or len(frame) != n:
                 _, frame = constraint.frame(state.x, state.entity)
@@ -229,11 +257,11 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
                     everything = np.concatenate([state.x, state.frozen])
                     neighbours = update_neighbours(neighbours, keep, everything, len(state.x), k)
                     fresh = len(state.x) - int(keep.sum())
-                    anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh:]])
+                    anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh :]])
                     h = sizing(everything)
                     frame = None
                     # survivors keep their last verified place; new bubbles were placed inside
-                    checked = np.concatenate([checked[keep], state.x[len(state.x) - fresh:]])
+                    checked = np.concatenate([checked[keep], state.x[len(state.x) - fresh :]])
             if not changed and step > interval * rounds and moved.max() < TOLERANCE:
                 break
     if state.level == VOLUME:
@@ -255,7 +283,7 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
     q, act, rule, firing = control.decide(control.delete, {"overlap": overlap})
     delete = np.zeros(n, bool)
     if act.any():
-        priority = q + 1e-9 * rng.random(n)     # equal q: a seeded random order, not the index order
+        priority = q + 1e-9 * rng.random(n)  # equal q: a seeded random order, not the index order
         delete = deletions(everything, h, neighbours, n, act, priority)
     # insertions next to open bubbles (not next to one being deleted)
     vacancy = settings["expected_neighbours"][level_name] / np.maximum(count, 1)
@@ -267,8 +295,9 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
         new_x, sources = _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng)
     deleted = np.flatnonzero(delete)
     new_ids = _new_ids(len(new_x), counters)
-    events.append(_events(state.ids[deleted], level_name, step, "delete", control.delete, rule[deleted],
-                          firing[deleted]))
+    events.append(
+        _events(state.ids[deleted], level_name, step, "delete", control.delete, rule[deleted], firing[deleted])
+    )
     events.append(_events(new_ids, level_name, step, "insert", control.insert, rule_i[sources], firing_i[sources]))
     if not delete.any() and not len(new_x):
         return None
@@ -326,7 +355,8 @@ def _statistics(packing, sizing, bubbles, initial_counts, initial_points, timing
     lower levels), events, timings."""
     expected_nodes, _ = sizing.expected_counts
     return {
-        "nodes": len(packing), "expected_nodes": expected_nodes,
+        "nodes": len(packing),
+        "expected_nodes": expected_nodes,
         **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
         "initial": initial_counts,
         "diameter": bubbles.factor,
@@ -343,5 +373,9 @@ def nearest_over_r0(points: np.ndarray, h: np.ndarray) -> dict:
     share within [0.85, 1.15], 1st and 99th percentiles."""
     distance, index = cKDTree(points).query(points, k=2, workers=-1)
     ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
-    return {"median": float(np.median(ratio)), "within_0.85_1.15": float(np.mean((ratio >= 0.85) & (ratio <= 1.15))),
-            "p01": float(np.percentile(ratio, 1)), "p99": float(np.percentile(ratio, 99))}
+    return {
+        "median": float(np.median(ratio)),
+        "within_0.85_1.15": float(np.mean((ratio >= 0.85) & (ratio <= 1.15))),
+        "p01": float(np.percentile(ratio, 1)),
+        "p99": float(np.percentile(ratio, 99)),
+    }

@@ -5,6 +5,7 @@ removes the normal part of forces and velocities (the tangent of a curve, the
 tangent plane of a patch). Projection uses the entity's own segments or
 triangles, so a bubble never crosses a feature curve onto another patch.
 """
+
 from __future__ import annotations
 
 import igl
@@ -34,7 +35,7 @@ class _EntityProjection:
         return self.frame(x, entity)[0]
 
     def _tree(self, key):
-        if key not in self.trees:   # built once per entity, reused at every step
+        if key not in self.trees:  # built once per entity, reused at every step
             tree = igl.AABB()
             tree.init(self.vertices[key], self.simplices[key])
             self.trees[key] = tree
@@ -48,7 +49,8 @@ class _EntityProjection:
         keys, starts = np.unique(entity[order], return_index=True)
         for key, rows in zip(keys, np.split(order, starts[1:])):
             _, index, closest = self._tree(key).squared_distance(
-                self.vertices[key], self.simplices[key], np.ascontiguousarray(x[rows]))
+                self.vertices[key], self.simplices[key], np.ascontiguousarray(x[rows])
+            )
             out[rows], simplex[rows] = closest, index
         return out, simplex
 
@@ -60,7 +62,7 @@ class CurveConstraint(_EntityProjection):
         lines = {i: c.polyline for i, c in enumerate(features.curves) if c.on_surface}
         segments = {i: np.column_stack([np.arange(len(p) - 1), np.arange(1, len(p))]) for i, p in lines.items()}
         super().__init__(lines, segments)
-        self.attribute = {}   # unit tangent of each segment
+        self.attribute = {}  # unit tangent of each segment
         for i, line in lines.items():
             d = np.diff(line, axis=0)
             self.attribute[i] = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -77,7 +79,7 @@ class PatchConstraint(_EntityProjection):
         mesh = geometry.mesh
         faces = {i: mesh.faces[p.faces] for i, p in enumerate(features.patches)}
         super().__init__({i: mesh.vertices for i in faces}, faces)
-        self.attribute = {i: mesh.face_normals[p.faces] for i, p in enumerate(features.patches)}   # unit normals
+        self.attribute = {i: mesh.face_normals[p.faces] for i, p in enumerate(features.patches)}  # unit normals
 
     @staticmethod
     def tangential(vectors, normal):

@@ -7,13 +7,15 @@ repulsive (> 0) below w = 1, attractive between 1 and 1.5. The force is
 scaled by r0 so that bubbles of every size move at the same relative pace
 (k0 = 1 per unit of r0, m = 1).
 """
+
 from __future__ import annotations
 
-from .._numba import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-CUTOFF = 1.5   # w beyond which the force vanishes
+from .._numba import numba
+
+CUTOFF = 1.5  # w beyond which the force vanishes
 
 
 @numba.njit(cache=True, inline="always")
@@ -130,8 +132,9 @@ def adopt(neighbours, x, first_new, movable):
                 neighbours[j, worst] = b
 
 
-def update_neighbours(neighbours: np.ndarray, keep: np.ndarray, everything: np.ndarray, movable: int,
-                      k: int) -> np.ndarray:
+def update_neighbours(
+    neighbours: np.ndarray, keep: np.ndarray, everything: np.ndarray, movable: int, k: int
+) -> np.ndarray:
     """Neighbour lists after a population change, without a full rebuild.
 
     ``keep`` marks the surviving old movable bubbles (their lists are renumbered,
@@ -166,7 +169,7 @@ def morton_order(x: np.ndarray, bits: int = 10) -> np.ndarray:
     if len(x) == 0:
         return np.zeros(0, dtype=np.int64)
     lo, hi = x.min(axis=0), x.max(axis=0)
-    cells = ((x - lo) / np.maximum(hi - lo, 1e-300) * (2 ** bits - 1)).astype(np.uint64)
+    cells = ((x - lo) / np.maximum(hi - lo, 1e-300) * (2**bits - 1)).astype(np.uint64)
     key = np.zeros(len(x), dtype=np.uint64)
     for bit in range(bits):
         for axis in range(3):

@@ -6,6 +6,7 @@ their triangles, thinned to the local spacing. The volume gets an octree
 lattice (a cell of size s emits its jittered centre where s matches h, else
 splits), thinned against the boundary nodes and itself.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,11 +15,11 @@ from scipy.spatial import cKDTree
 from ..sampling import thin
 from . import CORNER, CURVE, PATCH, VOLUME, Packing, register_packer
 
-SPACING_SLACK = 2 ** (1 / 3)     # a lattice cell of size s serves h in [s / slack, s * slack]
-SURFACE_EXCLUSION = 0.8          # fraction of h kept free between surface nodes
-VOLUME_EXCLUSION = 0.7           # fraction of h kept free between volume and other nodes
-JITTER = 0.1                     # lattice jitter, fraction of the cell size
-CANDIDATES_PER_H2 = 8.0          # surface candidates per h^2 of area before thinning
+SPACING_SLACK = 2 ** (1 / 3)  # a lattice cell of size s serves h in [s / slack, s * slack]
+SURFACE_EXCLUSION = 0.8  # fraction of h kept free between surface nodes
+VOLUME_EXCLUSION = 0.7  # fraction of h kept free between volume and other nodes
+JITTER = 0.1  # lattice jitter, fraction of the cell size
+CANDIDATES_PER_H2 = 8.0  # surface candidates per h^2 of area before thinning
 
 
 @register_packer("lattice")
@@ -31,8 +32,13 @@ def pack_lattice(geometry, features, sizing, *, seed: int = 0, knowledge=None) -
     boundary = Packing.concatenate(parts)
     parts.append(_volume_nodes(geometry, sizing, boundary, rng))
     packing = Packing.concatenate(parts)
-    packing.stats = {"nodes": len(packing), **{f"{name}_nodes": int((packing.level == k).sum())
-                                               for k, name in enumerate(("corner", "curve", "patch", "volume"))}}
+    packing.stats = {
+        "nodes": len(packing),
+        **{
+            f"{name}_nodes": int((packing.level == k).sum())
+            for k, name in enumerate(("corner", "curve", "patch", "volume"))
+        },
+    }
     return packing
 
 
@@ -53,13 +59,16 @@ def _curve_nodes(features, sizing, existing) -> Packing:
         h = sizing(curve.point_at(s))
         steps = np.concatenate([[0.0], np.cumsum(np.diff(s) * 0.5 * (1 / h[1:] + 1 / h[:-1]))])
         segments = max(3 if curve.closed else 1, int(np.round(steps[-1])))
-        targets = np.linspace(0.0, steps[-1], segments + 1)[1:-1] if not curve.closed \
+        targets = (
+            np.linspace(0.0, steps[-1], segments + 1)[1:-1]
+            if not curve.closed
             else np.linspace(0.0, steps[-1], segments + 1)[:-1]
+        )
         points.append(curve.point_at(np.interp(targets, steps, s)))
         entity.append(np.full(len(targets), index))
     points = np.concatenate(points).reshape(-1, 3) if points else np.zeros((0, 3))
     entity = np.concatenate(entity) if entity else np.zeros(0, int)
-    if len(existing) and len(points):   # a loop that starts at a corner repeats it
+    if len(existing) and len(points):  # a loop that starts at a corner repeats it
         gap, _ = cKDTree(existing).query(points)
         points, entity = points[gap > 1e-9 * sizing.h_min], entity[gap > 1e-9 * sizing.h_min]
     return Packing(points, np.full(len(points), CURVE), entity, sizing(points) / 2)
@@ -76,14 +85,14 @@ def _subdivide(triangles: np.ndarray, sizing, max_levels: int = 64):
     for _ in range(max_levels):
         if len(triangles) == 0:
             break
-        lengths = np.linalg.norm(triangles - np.roll(triangles, -1, axis=1), axis=2)   # edge k: vertex k to k+1
+        lengths = np.linalg.norm(triangles - np.roll(triangles, -1, axis=1), axis=2)  # edge k: vertex k to k+1
         longest = lengths.argmax(axis=1)
         fine = lengths.max(axis=1) <= sizing(triangles.mean(axis=1))
         leaves.append(triangles[fine])
         owners.append(owner[fine])
         t, k, owner = triangles[~fine], longest[~fine], owner[~fine]
         rows = np.arange(len(t))[:, None]
-        a, b, c = np.moveaxis(t[rows, (k[:, None] + np.arange(3)) % 3], 1, 0)   # a-b is the longest edge
+        a, b, c = np.moveaxis(t[rows, (k[:, None] + np.arange(3)) % 3], 1, 0)  # a-b is the longest edge
         middle = 0.5 * (a + b)
         triangles = np.concatenate([np.stack([a, middle, c], 1), np.stack([middle, b, c], 1)])
         owner = np.tile(owner, 2)
@@ -109,9 +118,9 @@ def _patch_nodes(geometry, features, sizing, boundary: Packing, rng) -> Packing:
     all_points = np.concatenate([boundary.points, candidates])
     h = sizing(all_points)
     keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
-    keep = keep[len(boundary):]
+    keep = keep[len(boundary) :]
     points = candidates[keep]
-    return Packing(points, np.full(len(points), PATCH), patch[keep], h[len(boundary):][keep] / 2)
+    return Packing(points, np.full(len(points), PATCH), patch[keep], h[len(boundary) :][keep] / 2)
 
 
 def _octree_lattice(geometry, sizing, rng, density: float | None = None) -> np.ndarray:
@@ -121,7 +130,7 @@ def _octree_lattice(geometry, sizing, rng, density: float | None = None) -> np.n
     lo, hi = geometry.bounds
     slack = SPACING_SLACK if density is None else 1.0
     reach = 1.0 if density is None else density ** (-1.0 / 3.0)
-    size = sizing.h_max * slack * reach * (1 - 1e-9)   # the coarsest cells emit (no round-off split)
+    size = sizing.h_max * slack * reach * (1 - 1e-9)  # the coarsest cells emit (no round-off split)
     counts = np.maximum(1, np.ceil((hi - lo) / size)).astype(int)
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)

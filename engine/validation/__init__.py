@@ -5,6 +5,7 @@ finite-width plate with a central hole in tension, meshed by the ``static-stress
 ``sphere`` (Lamé's thick hollow sphere under internal pressure, an octant with symmetry conditions).
 See docs/validation.md. Needs the optional ``fe`` extra (scikit-fem, pyamg); the core never imports it.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -13,7 +14,7 @@ from dataclasses import dataclass, field
 from ..errors import FuzzymeshError
 
 CASES = {"plate-hole": "plate_hole", "sphere": "sphere"}
-EXTRA = ("skfem", "pyamg")   # modules of the 'fe' extra: scikit-fem, pyamg
+EXTRA = ("skfem", "pyamg")  # modules of the 'fe' extra: scikit-fem, pyamg
 
 
 def require_fe() -> None:
@@ -25,8 +26,10 @@ def require_fe() -> None:
         except ImportError:
             missing.append({"skfem": "scikit-fem"}.get(module, module))
     if missing:
-        raise FuzzymeshError(f"validation needs {' and '.join(missing)} (the optional 'fe' extra), not installed",
-                             fix="pip install 'fuzzymesh[fe]'")
+        raise FuzzymeshError(
+            f"validation needs {' and '.join(missing)} (the optional 'fe' extra), not installed",
+            fix="pip install 'fuzzymesh[fe]'",
+        )
 
 
 @dataclass
@@ -58,8 +61,12 @@ class CaseResult:
     def table(self) -> str:
         """The case as text: title, facts, then quantity | computed | reference | error."""
         width = max(len(r.quantity) for r in self.rows)
-        lines = [self.title, "; ".join(f"{k} {_fmt(v)}" for k, v in self.facts.items()), "",
-                 f"{'quantity':{width}s}  {'computed':>11s}  {'reference':>11s}  {'error':>8s}  source"]
+        lines = [
+            self.title,
+            "; ".join(f"{k} {_fmt(v)}" for k, v in self.facts.items()),
+            "",
+            f"{'quantity':{width}s}  {'computed':>11s}  {'reference':>11s}  {'error':>8s}  source",
+        ]
         for r in self.rows:
             reference = "-" if r.reference is None else f"{r.reference:11.5g}"
             error = "-" if r.error is None else f"{100 * r.error:+7.2f}%"
@@ -67,9 +74,21 @@ class CaseResult:
         return "\n".join(lines)
 
     def as_dict(self) -> dict:
-        return {"name": self.name, "title": self.title, "facts": self.facts,
-                "rows": [{"quantity": r.quantity, "computed": r.computed, "reference": r.reference,
-                          "error": r.error, "source": r.source} for r in self.rows]}
+        return {
+            "name": self.name,
+            "title": self.title,
+            "facts": self.facts,
+            "rows": [
+                {
+                    "quantity": r.quantity,
+                    "computed": r.computed,
+                    "reference": r.reference,
+                    "error": r.error,
+                    "source": r.source,
+                }
+                for r in self.rows
+            ],
+        }
 
 
 def _fmt(value) -> str:

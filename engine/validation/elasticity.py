@@ -11,6 +11,7 @@ of FE post-processors).
 
 Needs the ``fe`` extra (scikit-fem, pyamg); :func:`engine.validation.require_fe` checks it first.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,8 +20,8 @@ import numpy as np
 
 from ..fe import CORNER, quadratic, row_index, tet_boundary
 
-QUADRATURE_ORDER = 2    # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
-TOLERANCE = 1e-10       # relative residual of the conjugate gradients
+QUADRATURE_ORDER = 2  # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
+TOLERANCE = 1e-10  # relative residual of the conjugate gradients
 
 
 @dataclass(frozen=True)
@@ -50,13 +51,13 @@ class Model:
     c of the displacement there is ``3 * dof[k] + c``.
     """
 
-    result: object            # engine.pipeline.Result
+    result: object  # engine.pipeline.Result
     points: np.ndarray
     tets10: np.ndarray
-    triangles6: np.ndarray    # the tets' own boundary faces (engine.fe.tet_boundary order)
-    face_patch: np.ndarray    # the patch of each
-    mesh: object              # skfem.MeshTet2
-    basis: object             # skfem.CellBasis, vector P2
+    triangles6: np.ndarray  # the tets' own boundary faces (engine.fe.tet_boundary order)
+    face_patch: np.ndarray  # the patch of each
+    mesh: object  # skfem.MeshTet2
+    basis: object  # skfem.CellBasis, vector P2
     dof: np.ndarray
 
     @property
@@ -84,8 +85,10 @@ class Model:
     def corner(self, *patches: str) -> int:
         """The mesh node at the solid's corner shared by the named patches."""
         features, faces = self.result.features, self.result.geometry.faces
-        vertices = [set(faces[np.concatenate([features.patches[i].faces for i in self.patch_indices(name)])]
-                        .ravel().tolist()) for name in patches]
+        vertices = [
+            set(faces[np.concatenate([features.patches[i].faces for i in self.patch_indices(name)])].ravel().tolist())
+            for name in patches
+        ]
         corners = [c for c, corner in enumerate(features.corners) if all(corner.vertex in v for v in vertices)]
         mesh = self.result.mesh
         nodes = np.flatnonzero((mesh.node_level == CORNER) & np.isin(mesh.node_entity, corners))
@@ -115,7 +118,7 @@ def build(result) -> Model:
     mesh = MeshTet2(np.ascontiguousarray(points.T), np.ascontiguousarray(tets10.T))
     basis = Basis(mesh, ElementVector(ElementTetP2()), intorder=QUADRATURE_ORDER)
     dof = np.empty(len(points), np.int64)
-    dof[tets10] = (basis.element_dofs[::3] // 3).T    # the element's local node order is tets10's
+    dof[tets10] = (basis.element_dofs[::3] // 3).T  # the element's local node order is tets10's
     return Model(result, points, tets10, triangles6, tet_boundary(result.mesh)[2], mesh, basis, dof)
 
 
@@ -136,8 +139,15 @@ def surface_load(model: Model, patches: tuple[str, ...], traction) -> np.ndarray
         t = traction(w.n)
         return t[0] * v[0] + t[1] * v[1] + t[2] * v[2]
 
-    return asm(form, FacetBasis(model.mesh, model.basis.elem, facets=np.concatenate([model.facets(p) for p in patches]),
-                                intorder=QUADRATURE_ORDER))
+    return asm(
+        form,
+        FacetBasis(
+            model.mesh,
+            model.basis.elem,
+            facets=np.concatenate([model.facets(p) for p in patches]),
+            intorder=QUADRATURE_ORDER,
+        ),
+    )
 
 
 def rigid_modes(locations: np.ndarray) -> np.ndarray:
@@ -145,7 +155,7 @@ def rigid_modes(locations: np.ndarray) -> np.ndarray:
     component = np.arange(locations.shape[1]) % 3
     modes = np.zeros((locations.shape[1], 6))
     modes[np.arange(len(component)), component] = 1.0
-    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):   # rotation in the (i, j) plane
+    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):  # rotation in the (i, j) plane
         modes[component == i, 3 + k] = -locations[j, component == i]
         modes[component == j, 3 + k] = locations[i, component == j]
     return modes
@@ -157,13 +167,17 @@ def solve(model: Model, K, f: np.ndarray, fixed: np.ndarray) -> tuple[np.ndarray
     from skfem import condense
 
     A, b, u, free = condense(K, f, D=np.unique(fixed))
-    solver = pyamg.smoothed_aggregation_solver(A.tocsr(), B=rigid_modes(model.basis.doflocs)[free],
-                                               max_levels=2, coarse_solver="splu")
+    solver = pyamg.smoothed_aggregation_solver(
+        A.tocsr(), B=rigid_modes(model.basis.doflocs)[free], max_levels=2, coarse_solver="splu"
+    )
     residuals: list = []
     u[free] = solver.solve(b, tol=TOLERANCE, accel="cg", maxiter=1000, residuals=residuals)
     reactions = (K @ u - f)[np.unique(fixed)]
-    return u, {"iterations": len(residuals) - 1, "residual": residuals[-1] / residuals[0],
-               "reaction": float(np.abs(reactions).max(initial=0.0))}
+    return u, {
+        "iterations": len(residuals) - 1,
+        "residual": residuals[-1] / residuals[0],
+        "reaction": float(np.abs(reactions).max(initial=0.0)),
+    }
 
 
 def displacement(model: Model, u: np.ndarray) -> np.ndarray:
@@ -175,7 +189,7 @@ def nodal_stress(model: Model, u: np.ndarray, material: Material) -> np.ndarray:
     """Stress (n, 3, 3) at every node: the mean of the stresses of the elements sharing it, there."""
     from skfem import Basis, ElementTetP2
 
-    nodes = ElementTetP2().doflocs.T                       # reference coordinates of the 10 local nodes
+    nodes = ElementTetP2().doflocs.T  # reference coordinates of the 10 local nodes
     at_nodes = Basis(model.mesh, model.basis.elem, quadrature=(nodes, np.full(10, 1 / 60)))
     stress = material.stress(at_nodes.interpolate(u).grad)  # (3, 3, elements, 10)
     values = stress.transpose(2, 3, 0, 1).reshape(-1, 9)

@@ -12,6 +12,7 @@ the two tangential normal stresses (equal in the exact solution), with r the dir
 centre. Each node is compared with Lamé's solution at its own radius; the table gives the mean over
 the patch's nodes and the largest deviation, relative to the exact value at r = a.
 """
+
 from __future__ import annotations
 
 import time
@@ -23,25 +24,27 @@ from ..pipeline import run as mesh_job
 from . import CaseResult, Row
 from .elasticity import Material, build, displacement, nodal_stress, solve, stiffness, surface_load
 
-MATERIAL = Material(E=200e3, nu=0.3)     # MPa
-PRESSURE = 100.0                          # MPa on the inner surface
+MATERIAL = Material(E=200e3, nu=0.3)  # MPa
+PRESSURE = 100.0  # MPa on the inner surface
 INNER, OUTER = 50.0, 100.0
-LAYERS = 14                               # default element size: the wall thickness / LAYERS
+LAYERS = 14  # default element size: the wall thickness / LAYERS
 
 
 def lame(r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lamé's thick sphere under internal pressure: radial displacement, radial and hoop stress at r."""
-    a3, b3, r3 = INNER ** 3, OUTER ** 3, np.asarray(r, float) ** 3
+    a3, b3, r3 = INNER**3, OUTER**3, np.asarray(r, float) ** 3
     scale = PRESSURE * a3 / (b3 - a3)
-    u = scale / MATERIAL.E * ((1 - 2 * MATERIAL.nu) * r + (1 + MATERIAL.nu) * b3 / (2 * r ** 2))
+    u = scale / MATERIAL.E * ((1 - 2 * MATERIAL.nu) * r + (1 + MATERIAL.nu) * b3 / (2 * r**2))
     return u, -scale * (b3 / r3 - 1), scale * (1 + b3 / (2 * r3))
 
 
 def job(scale: float = 1.0, seed: int = 0) -> dict:
     """The octant's job: the base pattern alone, h = (b - a) / LAYERS x ``scale``."""
-    return {"geometry": {"shape": "hollow_sphere_octant",
-                         "parameters": {"inner_radius": INNER, "outer_radius": OUTER}},
-            "size": scale * (OUTER - INNER) / LAYERS, "seed": seed}
+    return {
+        "geometry": {"shape": "hollow_sphere_octant", "parameters": {"inner_radius": INNER, "outer_radius": OUTER}},
+        "size": scale * (OUTER - INNER) / LAYERS,
+        "seed": seed,
+    }
 
 
 def solve_sphere(result) -> dict:
@@ -63,8 +66,12 @@ def solve_sphere(result) -> dict:
         r = np.linalg.norm(x, axis=1)
         radial = x / r[:, None]
         sigma_rr = np.einsum("ni,nij,nj->n", radial, stress[nodes], radial)
-        out[name] = {"r": r, "u_r": np.einsum("ni,ni->n", moved[nodes], radial), "sigma_rr": sigma_rr,
-                     "hoop": (np.einsum("nii->n", stress[nodes]) - sigma_rr) / 2}
+        out[name] = {
+            "r": r,
+            "u_r": np.einsum("ni,ni->n", moved[nodes], radial),
+            "sigma_rr": sigma_rr,
+            "hoop": (np.einsum("nii->n", stress[nodes]) - sigma_rr) / 2,
+        }
     return out
 
 
@@ -74,20 +81,33 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
     meshing = time.perf_counter() - start
     solved = solve_sphere(result)
     model = solved["model"]
-    facts = {"nodes": model.nodes, "tetrahedra": len(result.mesh.tets), "quadratic nodes": len(model.points),
-             "dofs": int(model.basis.N), "CG iterations": solved["solver"]["iterations"], "mesh s": round(meshing, 1),
-             "assemble s": round(solved["timings"]["assemble"], 1), "solve s": round(solved["timings"]["solve"], 1)}
-    title = (f"sphere: thick hollow sphere a = {INNER:g}, b = {OUTER:g} (octant, symmetry planes), internal "
-             f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:.3g}; 10-node tets")
+    facts = {
+        "nodes": model.nodes,
+        "tetrahedra": len(result.mesh.tets),
+        "quadratic nodes": len(model.points),
+        "dofs": int(model.basis.N),
+        "CG iterations": solved["solver"]["iterations"],
+        "mesh s": round(meshing, 1),
+        "assemble s": round(solved["timings"]["assemble"], 1),
+        "solve s": round(solved["timings"]["solve"], 1),
+    }
+    title = (
+        f"sphere: thick hollow sphere a = {INNER:g}, b = {OUTER:g} (octant, symmetry planes), internal "
+        f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:.3g}; 10-node tets"
+    )
     rows = []
-    for quantity, radius, surface, field, index in (("u_r at r = a", INNER, "inner", "u_r", 0),
-                                                    ("hoop stress at r = a", INNER, "inner", "hoop", 2),
-                                                    ("u_r at r = b", OUTER, "outer", "u_r", 0),
-                                                    ("hoop stress at r = b", OUTER, "outer", "hoop", 2)):
+    for quantity, radius, surface, field, index in (
+        ("u_r at r = a", INNER, "inner", "u_r", 0),
+        ("hoop stress at r = a", INNER, "inner", "hoop", 2),
+        ("u_r at r = b", OUTER, "outer", "u_r", 0),
+        ("hoop stress at r = b", OUTER, "outer", "hoop", 2),
+    ):
         values, exact = solved[surface][field], lame(solved[surface]["r"])[index]
         reference = float(lame(radius)[index])
         deviation = values - exact
         worst = deviation[np.argmax(np.abs(deviation))]
-        rows += [Row(f"{quantity}, mean of the nodes", reference + float(deviation.mean()), reference, "Lamé"),
-                 Row(f"{quantity}, worst node", reference + float(worst), reference, "Lamé")]
+        rows += [
+            Row(f"{quantity}, mean of the nodes", reference + float(deviation.mean()), reference, "Lamé"),
+            Row(f"{quantity}, worst node", reference + float(worst), reference, "Lamé"),
+        ]
     return CaseResult("sphere", title, facts, rows)

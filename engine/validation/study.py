@@ -12,6 +12,7 @@ the node count and of the signed error make the series; the node count from whic
 ratio uniform / graded says how many times fewer nodes the expert rules need. Writes
 ``fe_convergence.json``, ``.md`` and ``.png``.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,7 +30,7 @@ TARGET = 0.03
 SEEDS = (0, 1, 2)
 GRADED_SCALES = (5.0, 4.5, 4.0, 3.5, 3.0, 2.5, 2.0, 1.5, 1.0)
 UNIFORM_SCALES = (2.0, 1.5, 1.25, 1.1, 1.0, 0.9, 0.75, 0.6, 0.5)
-COLOURS = {"graded": "#228833", "uniform": "#4477aa"}   # the report's palette
+COLOURS = {"graded": "#228833", "uniform": "#4477aa"}  # the report's palette
 
 
 def measure(scale: float, graded: bool, seed: int = 0) -> dict:
@@ -39,11 +40,19 @@ def measure(scale: float, graded: bool, seed: int = 0) -> dict:
     meshed = time.perf_counter() - start
     solved = solve_plate(result)
     reference = peterson_kt(2 * PLATE["hole_radius"] / PLATE["width"])
-    return {"series": "graded" if graded else "uniform", "scale": scale, "size": scale * default_size(),
-            "nodes": len(result.mesh.points), "tetrahedra": len(result.mesh.tets),
-            "quadratic_nodes": len(solved["model"].points), "dofs": int(solved["model"].basis.N),
-            "Kt": solved["Kt"], "Kt_mid": solved["Kt_mid"], "error": (solved["Kt"] - reference) / reference,
-            "seconds": {"mesh": meshed, **solved["timings"]}}
+    return {
+        "series": "graded" if graded else "uniform",
+        "scale": scale,
+        "size": scale * default_size(),
+        "nodes": len(result.mesh.points),
+        "tetrahedra": len(result.mesh.tets),
+        "quadratic_nodes": len(solved["model"].points),
+        "dofs": int(solved["model"].basis.N),
+        "Kt": solved["Kt"],
+        "Kt_mid": solved["Kt_mid"],
+        "error": (solved["Kt"] - reference) / reference,
+        "seconds": {"mesh": meshed, **solved["timings"]},
+    }
 
 
 def nodes_at(rows: list[dict], target: float = TARGET) -> float | None:
@@ -75,8 +84,16 @@ def run_study(graded=GRADED_SCALES, uniform=UNIFORM_SCALES, seeds=SEEDS, progres
     at = {name: nodes_at(points) for name, points in series.items()}
     ratio = at["uniform"] / at["graded"] if at["graded"] and at["uniform"] else None
     reference = peterson_kt(2 * PLATE["hole_radius"] / PLATE["width"])
-    return {"case": "plate-hole", "target": TARGET, "Kt_peterson": reference, "seeds": list(seeds), "rows": rows,
-            "series": series, "nodes_at_target": at, "ratio": ratio}
+    return {
+        "case": "plate-hole",
+        "target": TARGET,
+        "Kt_peterson": reference,
+        "seeds": list(seeds),
+        "rows": rows,
+        "series": series,
+        "nodes_at_target": at,
+        "ratio": ratio,
+    }
 
 
 def means(rows: list[dict]) -> list[dict]:
@@ -85,11 +102,19 @@ def means(rows: list[dict]) -> list[dict]:
     for scale in sorted({r["scale"] for r in rows}, reverse=True):
         group = [r for r in rows if r["scale"] == scale]
         errors = [r["error"] for r in group]
-        out.append({"scale": scale, "size": group[0]["size"], "meshes": len(group),
-                    "nodes": float(np.mean([r["nodes"] for r in group])),
-                    "Kt": float(np.mean([r["Kt"] for r in group])),
-                    "error": float(np.mean(errors)), "error_min": min(errors), "error_max": max(errors),
-                    "seconds": float(np.mean([sum(r["seconds"].values()) for r in group]))})
+        out.append(
+            {
+                "scale": scale,
+                "size": group[0]["size"],
+                "meshes": len(group),
+                "nodes": float(np.mean([r["nodes"] for r in group])),
+                "Kt": float(np.mean([r["Kt"] for r in group])),
+                "error": float(np.mean(errors)),
+                "error_min": min(errors),
+                "error_max": max(errors),
+                "seconds": float(np.mean([sum(r["seconds"].values()) for r in group])),
+            }
+        )
     return out
 
 
@@ -106,22 +131,31 @@ def write_study(study: dict, out: Path) -> list[Path]:
 
 def markdown(study: dict) -> str:
     at = study["nodes_at_target"]
-    lines = ["# Plate with a hole: Kt error against node count, graded (static-stress recipe) and uniform meshes",
-             "", f"Peterson's Kt (net section, d/W = 0.2): {study['Kt_peterson']:.4f}. Each scale meshed with seeds "
-             f"{', '.join(map(str, study['seeds']))}; means over the seeds. Made by `fuzzymesh validate plate-hole "
-             "--study`; see docs/validation.md.", "",
-             "| series | scale | global size | nodes | Kt (thickness mean) | error | error range over the seeds "
-             "| seconds |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Plate with a hole: Kt error against node count, graded (static-stress recipe) and uniform meshes",
+        "",
+        f"Peterson's Kt (net section, d/W = 0.2): {study['Kt_peterson']:.4f}. Each scale meshed with seeds "
+        f"{', '.join(map(str, study['seeds']))}; means over the seeds. Made by `fuzzymesh validate plate-hole "
+        "--study`; see docs/validation.md.",
+        "",
+        "| series | scale | global size | nodes | Kt (thickness mean) | error | error range over the seeds | seconds |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, points in study["series"].items():
         for p in points:
-            lines.append(f"| {name} | {p['scale']:g} | {p['size']:.3g} | {p['nodes']:,.0f} | {p['Kt']:.4f} | "
-                         f"{100 * p['error']:+.2f} % | {100 * p['error_min']:+.2f} to {100 * p['error_max']:+.2f} % | "
-                         f"{p['seconds']:.0f} |")
-    lines += ["", f"Nodes from which the |mean error| stays within {100 * study['target']:g} % "
-              "(log-log interpolation): "
-              f"graded {_count(at['graded'])}, uniform {_count(at['uniform'])}"
-              + (f"; the uniform mesh needs {study['ratio']:.1f} times as many nodes." if study["ratio"] else "."), ""]
+            lines.append(
+                f"| {name} | {p['scale']:g} | {p['size']:.3g} | {p['nodes']:,.0f} | {p['Kt']:.4f} | "
+                f"{100 * p['error']:+.2f} % | {100 * p['error_min']:+.2f} to {100 * p['error_max']:+.2f} % | "
+                f"{p['seconds']:.0f} |"
+            )
+    lines += [
+        "",
+        f"Nodes from which the |mean error| stays within {100 * study['target']:g} % "
+        "(log-log interpolation): "
+        f"graded {_count(at['graded'])}, uniform {_count(at['uniform'])}"
+        + (f"; the uniform mesh needs {study['ratio']:.1f} times as many nodes." if study["ratio"] else "."),
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -143,8 +177,13 @@ def plot(study: dict, path: Path) -> None:
         rows = [r for r in study["rows"] if r["series"] == name]
         axis.plot([r["nodes"] for r in rows], [100 * r["error"] for r in rows], ".", color=colour, alpha=0.5)
         points = study["series"][name]
-        axis.plot([p["nodes"] for p in points], [100 * p["error"] for p in points], "o-", color=colour,
-                  label="graded: static-stress recipe" if name == "graded" else "uniform: base pattern only")
+        axis.plot(
+            [p["nodes"] for p in points],
+            [100 * p["error"] for p in points],
+            "o-",
+            color=colour,
+            label="graded: static-stress recipe" if name == "graded" else "uniform: base pattern only",
+        )
         if study["nodes_at_target"][name]:
             axis.axvline(study["nodes_at_target"][name], color=colour, linestyle=":")
     axis.axhline(0.0, color="k", linewidth=0.5)
@@ -153,8 +192,10 @@ def plot(study: dict, path: Path) -> None:
     axis.set_ylabel("Kt error against Peterson (%)")
     title = "plate with a hole in tension, 10-node tetrahedra (dots: seeds, line: mean)"
     if study["ratio"]:
-        title += f"\nwithin {target:g} % from {study['nodes_at_target']['graded']:,.0f} nodes graded, " \
-                 f"{study['nodes_at_target']['uniform']:,.0f} uniform: {study['ratio']:.1f}x fewer"
+        title += (
+            f"\nwithin {target:g} % from {study['nodes_at_target']['graded']:,.0f} nodes graded, "
+            f"{study['nodes_at_target']['uniform']:,.0f} uniform: {study['ratio']:.1f}x fewer"
+        )
     axis.set_title(title, fontsize=10)
     axis.legend(fontsize=8, loc="lower right")
     axis.grid(True, which="both", alpha=0.3)

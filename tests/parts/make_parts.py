@@ -8,6 +8,7 @@ file is checked to bound one closed solid. Same code, same files: nothing is ran
 
 Run as ``python tests/parts/make_parts.py OUTDIR [NAME ...]``.
 """
+
 from __future__ import annotations
 
 import json
@@ -27,6 +28,7 @@ EPS = 1e-3
 
 
 # ----------------------------------------------------------------------------------------------- helpers
+
 
 def _one(dim_tags) -> int:
     """The tag of the single volume in ``dim_tags``."""
@@ -90,6 +92,7 @@ def _prism(points, z0, z1) -> int:
 
 # ----------------------------------------------------------------------------------------------- the parts
 
+
 def fillet_block() -> int:
     """A block with every edge rounded and a through bore."""
     block = _fillet(occ.addBox(0, 0, 0, 80, 50, 30), [c for _, c in occ.getEntities(1)], 5)
@@ -99,14 +102,21 @@ def fillet_block() -> int:
 def chamfer_block() -> int:
     """A block with chamfered top edges and a through hole chamfered at both rims."""
     block = _cut(occ.addBox(0, 0, 0, 80, 50, 30), _hole(40, 25, -1, 31, 8))
-    return _chamfer(block, _curves(lambda b: abs(b[5] - 30) < EPS and abs(b[2] - 30) < EPS)
-                    + _curves(lambda b: abs(b[2]) < EPS and abs(b[5]) < EPS and b[3] - b[0] < 17), 3)
+    return _chamfer(
+        block,
+        _curves(lambda b: abs(b[5] - 30) < EPS and abs(b[2] - 30) < EPS)
+        + _curves(lambda b: abs(b[2]) < EPS and abs(b[5]) < EPS and b[3] - b[0] < 17),
+        3,
+    )
 
 
 def cone_pin() -> int:
     """A locating pin: flange, shank and a conical tip."""
-    return _fuse(occ.addCylinder(0, 0, 0, 0, 0, 8, 20), occ.addCylinder(0, 0, 8, 0, 0, 40, 10),
-                 occ.addCone(0, 0, 48, 0, 0, 20, 10, 3))
+    return _fuse(
+        occ.addCylinder(0, 0, 0, 0, 0, 8, 20),
+        occ.addCylinder(0, 0, 8, 0, 0, 40, 10),
+        occ.addCone(0, 0, 48, 0, 0, 20, 10, 3),
+    )
 
 
 def countersunk_plate() -> int:
@@ -126,7 +136,9 @@ def torus_ring() -> int:
 
 def boss_plate() -> int:
     """A plate carrying three cylindrical bosses, each with a blind hole."""
-    plate = _fuse(occ.addBox(0, 0, 0, 140, 90, 10), *[_hole(x, y, 5, 30, 12) for x, y in ((30, 25), (110, 25), (70, 65))])
+    plate = _fuse(
+        occ.addBox(0, 0, 0, 140, 90, 10), *[_hole(x, y, 5, 30, 12) for x, y in ((30, 25), (110, 25), (70, 65))]
+    )
     return _cut(plate, *[_hole(x, y, 15, 31, 5) for x, y in ((30, 25), (110, 25), (70, 65))])
 
 
@@ -148,8 +160,12 @@ def drilled_block() -> int:
 
 def slotted_plate() -> int:
     """A plate with two through slots and a blind slot."""
-    return _cut(occ.addBox(0, 0, 0, 150, 80, 12), _slot(20, 60, 20, -1, 13, 10), _slot(90, 130, 20, -1, 13, 10),
-                _slot(30, 120, 58, 6, 13, 12))
+    return _cut(
+        occ.addBox(0, 0, 0, 150, 80, 12),
+        _slot(20, 60, 20, -1, 13, 10),
+        _slot(90, 130, 20, -1, 13, 10),
+        _slot(30, 120, 58, 6, 13, 12),
+    )
 
 
 def ribbed_plate() -> int:
@@ -160,20 +176,25 @@ def ribbed_plate() -> int:
 
 def thin_tube() -> int:
     """A thin-walled tube (wall 0.6, under a quarter of the default size) with a collar at one end."""
-    return _cut(_fuse(occ.addCylinder(0, 0, 0, 0, 0, 100, 20), occ.addCylinder(0, 0, 0, 0, 0, 10, 25)),
-                occ.addCylinder(0, 0, -1, 0, 0, 102, 19.4))
+    return _cut(
+        _fuse(occ.addCylinder(0, 0, 0, 0, 0, 100, 20), occ.addCylinder(0, 0, 0, 0, 0, 10, 25)),
+        occ.addCylinder(0, 0, -1, 0, 0, 102, 19.4),
+    )
 
 
 def thin_fin() -> int:
     """A block carrying a fin 0.7 thick (under a quarter of the default size) and a thick web."""
-    return _fuse(occ.addBox(0, 0, 0, 100, 60, 20), occ.addBox(10, 29.65, 20, 80, 0.7, 30),
-                 occ.addBox(10, 8, 20, 6, 44, 30))
+    return _fuse(
+        occ.addBox(0, 0, 0, 100, 60, 20), occ.addBox(10, 29.65, 20, 80, 0.7, 30), occ.addBox(10, 8, 20, 6, 44, 30)
+    )
 
 
 def freeform_top() -> int:
     """A block whose top is a bicubic B-spline face."""
-    heights = np.array([[30, 32, 35, 33, 30], [31, 36, 42, 38, 32], [33, 40, 46, 41, 34],
-                        [31, 35, 40, 37, 31], [30, 31, 33, 32, 30]], dtype=float)
+    heights = np.array(
+        [[30, 32, 35, 33, 30], [31, 36, 42, 38, 32], [33, 40, 46, 41, 34], [31, 35, 40, 37, 31], [30, 31, 33, 32, 30]],
+        dtype=float,
+    )
     xs, ys = np.linspace(-10, 110, 5), np.linspace(-10, 90, 5)
     points = [occ.addPoint(x, y, heights[j, i]) for j, y in enumerate(ys) for i, x in enumerate(xs)]
     skin = occ.addBSplineSurface(points, 5)
@@ -195,8 +216,12 @@ def lofted_handle() -> int:
 def filleted_hole_floor() -> int:
     """A pocketed block with through holes in the pocket floor; the floor meets the hole walls (r 3) and the
     pocket walls (r 4) through tangent fillets."""
-    block = _cut(occ.addBox(0, 0, 0, 100, 70, 30), occ.addBox(15, 15, 18, 70, 40, 13),
-                 _hole(35, 35, -1, 19, 7), _hole(65, 35, -1, 19, 7))
+    block = _cut(
+        occ.addBox(0, 0, 0, 100, 70, 30),
+        occ.addBox(15, 15, 18, 70, 40, 13),
+        _hole(35, 35, -1, 19, 7),
+        _hole(65, 35, -1, 19, 7),
+    )
     floor = _curves(_at_z(18))
     rims = [c for c in floor if occ.getBoundingBox(1, c)[3] - occ.getBoundingBox(1, c)[0] < 15]
     walls = [c for c in floor if c not in rims]
@@ -215,16 +240,23 @@ def tray() -> int:
 def bracket() -> int:
     """An L-bracket with a filleted inner corner and two holes in each leg."""
     angle = _fuse(occ.addBox(0, 0, 0, 80, 50, 10), occ.addBox(0, 0, 0, 10, 50, 70))
-    angle = _fillet(angle, _curves(lambda b: abs(b[0] - 10) < EPS and abs(b[3] - 10) < EPS
-                                   and abs(b[2] - 10) < EPS and abs(b[5] - 10) < EPS), 8)
+    angle = _fillet(
+        angle,
+        _curves(
+            lambda b: abs(b[0] - 10) < EPS and abs(b[3] - 10) < EPS and abs(b[2] - 10) < EPS and abs(b[5] - 10) < EPS
+        ),
+        8,
+    )
     holes = [_hole(55, y, -1, 11, 4) for y in (15, 35)] + [occ.addCylinder(-1, y, 45, 12, 0, 0, 4) for y in (15, 35)]
     return _cut(angle, *holes)
 
 
 def hole_pattern_block() -> int:
     """A block drilled with a 3 x 6 pattern of 18 small through holes."""
-    return _cut(occ.addBox(0, 0, 0, 120, 80, 20), *[_hole(x, y, -1, 21, 2.5)
-                                                     for x in np.linspace(15, 105, 6) for y in (20, 40, 60)])
+    return _cut(
+        occ.addBox(0, 0, 0, 120, 80, 20),
+        *[_hole(x, y, -1, 21, 2.5) for x in np.linspace(15, 105, 6) for y in (20, 40, 60)],
+    )
 
 
 def chamfered_riser() -> int:
@@ -264,11 +296,17 @@ def hex_nut() -> int:
 
 def stepped_shaft() -> int:
     """A stepped shaft (30 / 25 / 20) with chamfered ends, a keyway in the middle step and a groove."""
-    shaft = _fuse(occ.addCylinder(0, 0, 0, 0, 0, 40, 15), occ.addCylinder(0, 0, 40, 0, 0, 60, 12.5),
-                  occ.addCylinder(0, 0, 100, 0, 0, 40, 10))
+    shaft = _fuse(
+        occ.addCylinder(0, 0, 0, 0, 0, 40, 15),
+        occ.addCylinder(0, 0, 40, 0, 0, 60, 12.5),
+        occ.addCylinder(0, 0, 100, 0, 0, 40, 10),
+    )
     shaft = _chamfer(shaft, _curves(_at_z(0)) + _curves(_at_z(140)), 1.5)
-    key = _fuse(occ.addBox(8.5, -4, 55, 5, 8, 30), occ.addCylinder(8.5, 0, 55, 5, 0, 0, 4),
-                occ.addCylinder(8.5, 0, 85, 5, 0, 0, 4))
+    key = _fuse(
+        occ.addBox(8.5, -4, 55, 5, 8, 30),
+        occ.addCylinder(8.5, 0, 55, 5, 0, 0, 4),
+        occ.addCylinder(8.5, 0, 85, 5, 0, 0, 4),
+    )
     groove = _cut(occ.addCylinder(0, 0, 120, 0, 0, 3, 11), occ.addCylinder(0, 0, 119, 0, 0, 5, 8.5))
     return _cut(shaft, key, groove)
 
@@ -280,23 +318,53 @@ def pillow_block() -> int:
     body = _fuse(occ.addBox(-60, -20, 0, 120, 40, 15), occ.addBox(-30, -20, 10, 60, 40, 30), housing)
     body = _fillet(body, _curves(lambda b: _at_z(15)(b) and b[4] - b[1] > 39), 5)
     body = _cut(body, occ.addCylinder(0, -21, 40, 0, 42, 0, 18), *[_hole(x, 0, -1, 16, 6) for x in (-45, 45)])
-    return _chamfer(body, _curves(lambda b: abs(b[1] + 20) < EPS and abs(b[4] + 20) < EPS and b[3] - b[0] < 37)
-                    + _curves(lambda b: abs(b[1] - 20) < EPS and abs(b[4] - 20) < EPS and b[3] - b[0] < 37), 1.5)
+    return _chamfer(
+        body,
+        _curves(lambda b: abs(b[1] + 20) < EPS and abs(b[4] + 20) < EPS and b[3] - b[0] < 37)
+        + _curves(lambda b: abs(b[1] - 20) < EPS and abs(b[4] - 20) < EPS and b[3] - b[0] < 37),
+        1.5,
+    )
 
 
-PARTS = {f.__name__: f for f in (
-    fillet_block, chamfer_block, cone_pin, countersunk_plate, torus_ring, boss_plate, pocket_block, drilled_block,
-    slotted_plate, ribbed_plate, thin_tube, thin_fin, freeform_top, lofted_handle, filleted_hole_floor, tray,
-    bracket, hole_pattern_block, chamfered_riser, flange, counterbore_plate, hex_nut, stepped_shaft, pillow_block)}
+PARTS = {
+    f.__name__: f
+    for f in (
+        fillet_block,
+        chamfer_block,
+        cone_pin,
+        countersunk_plate,
+        torus_ring,
+        boss_plate,
+        pocket_block,
+        drilled_block,
+        slotted_plate,
+        ribbed_plate,
+        thin_tube,
+        thin_fin,
+        freeform_top,
+        lofted_handle,
+        filleted_hole_floor,
+        tray,
+        bracket,
+        hole_pattern_block,
+        chamfered_riser,
+        flange,
+        counterbore_plate,
+        hex_nut,
+        stepped_shaft,
+        pillow_block,
+    )
+}
 
 
 # ----------------------------------------------------------------------------------------------- export
+
 
 def _export(path: Path, angle: float, linear: float) -> None:
     """Write the current model's OpenCASCADE tessellation as binary STL."""
     gmsh.option.setNumber("Mesh.Binary", 1)
     gmsh.option.setNumber("Mesh.StlOneSolidPerSurface", 0)
-    gmsh.option.setNumber("Mesh.StlLinearDeflectionRelative", 0)   # one absolute deflection: faces share edges
+    gmsh.option.setNumber("Mesh.StlLinearDeflectionRelative", 0)  # one absolute deflection: faces share edges
     gmsh.option.setNumber("Mesh.StlLinearDeflection", linear)
     gmsh.option.setNumber("Mesh.StlAngularDeflection", math.radians(angle))
     gmsh.write(str(path))
@@ -312,8 +380,9 @@ def _clean(path: Path) -> trimesh.Trimesh:
     mesh.remove_unreferenced_vertices()
     trimesh.repair.fix_normals(mesh)
     if not (mesh.is_watertight and mesh.is_volume and mesh.body_count == 1):
-        raise RuntimeError(f"{path.name}: watertight {mesh.is_watertight}, volume {mesh.is_volume}, "
-                           f"bodies {mesh.body_count}")
+        raise RuntimeError(
+            f"{path.name}: watertight {mesh.is_watertight}, volume {mesh.is_volume}, bodies {mesh.body_count}"
+        )
     mesh.export(path, file_type="stl")
     return mesh
 
@@ -332,7 +401,7 @@ def make_parts(out_dir, names=None) -> dict[str, dict[str, Path]]:
         for name in names or PARTS:
             paths[name] = {}
             for tessellation, (angle, linear) in TESSELLATIONS.items():
-                gmsh.clear()                      # a fresh solid: OpenCASCADE keeps a face's first tessellation
+                gmsh.clear()  # a fresh solid: OpenCASCADE keeps a face's first tessellation
                 volume = PARTS[name]()
                 occ.synchronize()
                 cad_volume = occ.getMass(3, volume)
@@ -341,9 +410,16 @@ def make_parts(out_dir, names=None) -> dict[str, dict[str, Path]]:
                 _export(path, angle, linear * diagonal)
                 mesh = _clean(path)
                 paths[name][tessellation] = path
-                manifest.append({"name": name, "tessellation": tessellation, "path": path.name,
-                                 "cad_volume": cad_volume, "stl_volume": float(mesh.volume),
-                                 "triangles": len(mesh.faces)})
+                manifest.append(
+                    {
+                        "name": name,
+                        "tessellation": tessellation,
+                        "path": path.name,
+                        "cad_volume": cad_volume,
+                        "stl_volume": float(mesh.volume),
+                        "triangles": len(mesh.faces),
+                    }
+                )
     finally:
         gmsh.clear()
         if started:

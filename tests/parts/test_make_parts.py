@@ -1,4 +1,5 @@
 """The parts corpus: every part builds, both tessellations bound one closed solid close to the CAD volume."""
+
 import importlib.util
 import json
 from pathlib import Path

@@ -7,6 +7,7 @@ distance between the mesh boundary and the input surface within 0.1 h (h the tar
 Cases known not to meet a bound yet are strict xfails naming the bound, so a fix shows up as a pass;
 the heavy ones run in bench/parts.py.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -28,18 +29,21 @@ _spec.loader.exec_module(make_parts)
 PARTS = sorted(make_parts.PARTS)
 # every part at its default size from both tessellations, and with the static-stress recipe from the
 # coarse one; the runs of over ~500k tets are benchmarks (bench/parts.py runs every case), not tests
-CASES = [(part, tessellation, None) for part in PARTS for tessellation in ("coarse", "fine")] + \
-    [(part, "coarse", "static-stress") for part in PARTS]
-HEAVY = {("thin_tube", "coarse", None): "2 elements through its 0.6 mm wall: about 2M tets",
-         ("thin_tube", "fine", None): "2 elements through its 0.6 mm wall: about 2M tets",
-         ("thin_tube", "coarse", "static-stress"): "2 elements through its 0.6 mm wall: about 2M tets",
-         ("hole_pattern_block", "coarse", "static-stress"): "18 holes at radius / 8: about 3.7M tets",
-         ("drilled_block", "coarse", "static-stress"): "the hole pattern on its bores: about 1.3M tets",
-         ("flange", "coarse", "static-stress"): "the hole pattern on its bolt circle: about 0.5M tets"}
-SAMPLES = 20_000      # points on each surface for the Hausdorff distances
+CASES = [(part, tessellation, None) for part in PARTS for tessellation in ("coarse", "fine")] + [
+    (part, "coarse", "static-stress") for part in PARTS
+]
+HEAVY = {
+    ("thin_tube", "coarse", None): "2 elements through its 0.6 mm wall: about 2M tets",
+    ("thin_tube", "fine", None): "2 elements through its 0.6 mm wall: about 2M tets",
+    ("thin_tube", "coarse", "static-stress"): "2 elements through its 0.6 mm wall: about 2M tets",
+    ("hole_pattern_block", "coarse", "static-stress"): "18 holes at radius / 8: about 3.7M tets",
+    ("drilled_block", "coarse", "static-stress"): "the hole pattern on its bores: about 1.3M tets",
+    ("flange", "coarse", "static-stress"): "the hole pattern on its bolt circle: about 0.5M tets",
+}
+SAMPLES = 20_000  # points on each surface for the Hausdorff distances
 MIN_DIHEDRAL = 10.0
 VOLUME = 0.005
-HAUSDORFF = 0.1       # x h
+HAUSDORFF = 0.1  # x h
 
 # (part, tessellation, recipe) -> the bound it does not meet yet (see the closing note of issue 14)
 KNOWN = {
@@ -72,16 +76,21 @@ def _cases():
 
 
 def _surface_samples(vertices, triangles, count, rng):
-    area = 0.5 * np.linalg.norm(np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
-                                         vertices[triangles[:, 2]] - vertices[triangles[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(
+        np.cross(
+            vertices[triangles[:, 1]] - vertices[triangles[:, 0]], vertices[triangles[:, 2]] - vertices[triangles[:, 0]]
+        ),
+        axis=1,
+    )
     pick = rng.choice(len(triangles), size=count, p=area / area.sum())
     weights = rng.dirichlet([1.0, 1.0, 1.0], size=count)
     return np.einsum("ij,ijk->ik", weights, vertices[triangles[pick]])
 
 
 def _distance(points, vertices, triangles):
-    squared, _, _ = igl.point_mesh_squared_distance(np.ascontiguousarray(points), np.ascontiguousarray(vertices),
-                                                    np.ascontiguousarray(triangles, dtype=np.int64))
+    squared, _, _ = igl.point_mesh_squared_distance(
+        np.ascontiguousarray(points), np.ascontiguousarray(vertices), np.ascontiguousarray(triangles, dtype=np.int64)
+    )
     return np.sqrt(squared)
 
 
@@ -99,7 +108,9 @@ def test_part_meshes_valid_and_close_to_its_surface(corpus, part, tessellation, 
     assert (quality.volume > 0).all(), "every tet of positive volume"
     assert result.boundary["two_manifold"] and result.boundary["boundary_edges"] == 0, "closed two-manifold boundary"
     assert quality.min_dihedral.min() >= MIN_DIHEDRAL, f"min dihedral {quality.min_dihedral.min():.2f} deg"
-    assert abs(mesh.volume / geometry.volume - 1) <= VOLUME, f"volume {100 * (mesh.volume / geometry.volume - 1):+.3f} %"
+    assert abs(mesh.volume / geometry.volume - 1) <= VOLUME, (
+        f"volume {100 * (mesh.volume / geometry.volume - 1):+.3f} %"
+    )
 
     rng = np.random.default_rng(0)
     on_mesh = _surface_samples(mesh.points, mesh.boundary, SAMPLES, rng)

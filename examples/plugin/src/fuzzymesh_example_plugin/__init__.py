@@ -5,6 +5,7 @@ volume node moved by up to JITTER x h in a random direction drawn from the job's
 leaves the solid or comes within h / 2 of another node's lattice place. ``mesh`` keeps the Mesher
 protocol: the built-in Delaunay mesher, with the node count of each level added to the mesh's stats.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,7 +26,7 @@ def pack(geometry, features, sizing, *, seed, knowledge):
     step = rng.normal(size=(len(volume), 3))
     step *= (JITTER * h * rng.random(len(volume)) / np.linalg.norm(step, axis=1))[:, None]
     moved = packing.points[volume] + step
-    distance, index = cKDTree(packing.points).query(moved, k=2)   # the nearest other node than itself
+    distance, index = cKDTree(packing.points).query(moved, k=2)  # the nearest other node than itself
     gap = np.where(index[:, 0] == volume, distance[:, 1], distance[:, 0])
     keep = geometry.contains(moved) & (gap > h / 2)
     packing.points[volume[keep]] = moved[keep]
@@ -36,6 +37,7 @@ def pack(geometry, features, sizing, *, seed, knowledge):
 
 def mesh(packing, geometry, features, *, seed):
     result = get_mesher("delaunay")(packing, geometry, features, seed=seed)
-    result.stats["nodes_per_level"] = {name: int(np.count_nonzero(result.node_level == k))
-                                       for k, name in enumerate(NODE_LEVELS)}
+    result.stats["nodes_per_level"] = {
+        name: int(np.count_nonzero(result.node_level == k)) for k, name in enumerate(NODE_LEVELS)
+    }
     return result
