@@ -47,10 +47,6 @@ HAUSDORFF = 0.1  # x h
 
 # (part, tessellation, recipe) -> the bound it does not meet yet (see the closing note of issue 14)
 KNOWN = {
-    ("cone_pin", "fine", None): "volume -0.54 %: chords of the shank and cone at 24 per circle",
-    ("drilled_block", "coarse", None): "input -> mesh 0.11 h at a drill point's tip: a node within 0.5 h of it",
-    ("hex_nut", "fine", None): "mesh -> input 0.10 h",
-    ("hex_nut", "coarse", "static-stress"): "mesh -> input 0.10 h",
     ("stepped_shaft", "coarse", None): "volume -0.52 %",
     ("stepped_shaft", "fine", None): "volume -0.67 %: chords at 24 per circle (40: -0.30 %)",
     ("stepped_shaft", "coarse", "static-stress"): "mesh -> input 0.10 h at the keyway's rounded ends",
