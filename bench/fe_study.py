@@ -36,6 +36,7 @@ A mesh is counted as reaching a target from the node count where the |error| of 
 it (the mean over the seeds is tabulated too); meshes refused by fuzzymesh's acceptance gate are
 counted and left out of their series.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -62,8 +63,8 @@ from engine.validation.sphere import lame  # noqa: E402
 MATERIAL = Material(E=200e3, nu=0.3)
 TENSION = 100.0
 PRESSURE = 100.0
-SAMPLES = 101                      # heights along a root line for the through-thickness mean
-HOLE = dict(near=0.125, far=1.0, extent=3.0)    # patterns/hole.yaml defaults (times the radius)
+SAMPLES = 101  # heights along a root line for the through-thickness mean
+HOLE = dict(near=0.125, far=1.0, extent=3.0)  # patterns/hole.yaml defaults (times the radius)
 REFERENCE_FILE = Path(__file__).with_name("fe_reference.json")
 
 
@@ -72,9 +73,9 @@ class Case:
     name: str
     shape: str
     parameters: dict
-    kind: str                       # "plate" or "sphere"
-    roots: tuple = (90.0, -90.0)    # root angles (degrees from +x) for a plate
-    nominal: str = "net"            # "net" (Peterson) or "gross"
+    kind: str  # "plate" or "sphere"
+    roots: tuple = (90.0, -90.0)  # root angles (degrees from +x) for a plate
+    nominal: str = "net"  # "net" (Peterson) or "gross"
     note: str = ""
     hole: dict = field(default_factory=lambda: dict(HOLE))
 
@@ -91,20 +92,39 @@ class Case:
 
 
 def plate(name, radius, thickness=10.0, width=100.0, hole_y=0.0, **kw) -> Case:
-    return Case(name, "plate_with_hole", dict(length=200.0, width=width, thickness=thickness, hole_radius=radius,
-                                              hole_x=0.0, hole_y=hole_y), "plate", **kw)
+    return Case(
+        name,
+        "plate_with_hole",
+        dict(length=200.0, width=width, thickness=thickness, hole_radius=radius, hole_x=0.0, hole_y=hole_y),
+        "plate",
+        **kw,
+    )
 
 
-CASES = {c.name: c for c in [
-    plate("hole d/W 0.1, t 10", 5.0, note="central hole, Peterson 2.722"),
-    plate("hole d/W 0.3, t 10", 15.0, note="central hole, Peterson 2.349"),
-    plate("hole d/W 0.5, t 10", 25.0, note="central hole, Peterson 2.159"),
-    plate("hole d/W 0.3, t 30", 15.0, thickness=30.0, note="thick plate (t = 2 r)"),
-    plate("edge hole", 10.0, hole_y=30.0, roots=(90.0,), nominal="gross",
-          note="r 10 at y = 30 of W 100: ligament 10 to the edge; root next to the edge, sigma / S"),
-    Case("sphere", "hollow_sphere_octant", dict(inner_radius=50.0, outer_radius=100.0), "sphere",
-         note="Lame, hoop stress at r = a"),
-]}
+CASES = {
+    c.name: c
+    for c in [
+        plate("hole d/W 0.1, t 10", 5.0, note="central hole, Peterson 2.722"),
+        plate("hole d/W 0.3, t 10", 15.0, note="central hole, Peterson 2.349"),
+        plate("hole d/W 0.5, t 10", 25.0, note="central hole, Peterson 2.159"),
+        plate("hole d/W 0.3, t 30", 15.0, thickness=30.0, note="thick plate (t = 2 r)"),
+        plate(
+            "edge hole",
+            10.0,
+            hole_y=30.0,
+            roots=(90.0,),
+            nominal="gross",
+            note="r 10 at y = 30 of W 100: ligament 10 to the edge; root next to the edge, sigma / S",
+        ),
+        Case(
+            "sphere",
+            "hollow_sphere_octant",
+            dict(inner_radius=50.0, outer_radius=100.0),
+            "sphere",
+            note="Lame, hoop stress at r = a",
+        ),
+    ]
+}
 
 
 # ----------------------------------------------------------------------------------------------- model
@@ -119,7 +139,7 @@ class FEModel:
         self.basis = Basis(self.mesh, ElementVector(ElementTetP2()), intorder=2)
         self.dof = np.zeros(len(points), np.int64)
         self.dof[tets10] = (self.basis.element_dofs[::3] // 3).T
-        sides = np.concatenate([tets10[:, SIDE_NODES[k]] for k in range(4)])      # (4m, 6)
+        sides = np.concatenate([tets10[:, SIDE_NODES[k]] for k in range(4)])  # (4m, 6)
         key = np.sort(sides[:, :3], axis=1)
         _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
         self.triangles6 = sides[count[inverse.ravel()] == 1]
@@ -127,17 +147,17 @@ class FEModel:
     def facets(self, test) -> np.ndarray:
         """Boundary facets whose three corners satisfy test(xyz (3, n)) -> bool (n,)."""
         f = self.mesh.boundary_facets()
-        corners = self.mesh.p[:, self.mesh.facets[:, f]]                       # (3, 3 corners, k)
+        corners = self.mesh.p[:, self.mesh.facets[:, f]]  # (3, 3 corners, k)
         ok = np.all([test(corners[:, i]) for i in range(3)], axis=0)
         return f[ok]
 
     def triangles(self, test) -> np.ndarray:
-        xyz = self.points[self.triangles6[:, :3]]                              # (t, 3, 3)
+        xyz = self.points[self.triangles6[:, :3]]  # (t, 3, 3)
         ok = np.all([test(xyz[:, i].T) for i in range(3)], axis=0)
         return self.triangles6[ok]
 
     def nearest(self, xyz) -> int:
-        return int(np.argmin(np.linalg.norm(self.points[:self.vertices] - np.asarray(xyz), axis=1)))
+        return int(np.argmin(np.linalg.norm(self.points[: self.vertices] - np.asarray(xyz), axis=1)))
 
     def dofs(self, nodes, component):
         return 3 * self.dof[np.atleast_1d(nodes)] + component
@@ -162,8 +182,9 @@ def solve_plate(case: Case, model: FEModel) -> dict:
     ends = model.facets(lambda x: np.abs(np.abs(x[0]) - L / 2) < tol)
     f = _load(model, ends, lambda n: (TENSION * n[0], 0 * n[0], 0 * n[0]))
     a, b, c = (model.nearest((-L / 2, -W / 2, 0)), model.nearest((L / 2, -W / 2, 0)), model.nearest((-L / 2, W / 2, 0)))
-    fixed = np.concatenate([model.dofs(a, k) for k in range(3)] + [model.dofs(b, k) for k in (1, 2)]
-                           + [model.dofs(c, 2)])
+    fixed = np.concatenate(
+        [model.dofs(a, k) for k in range(3)] + [model.dofs(b, k) for k in (1, 2)] + [model.dofs(c, 2)]
+    )
     u, info = solve(model, K, f, fixed)
     sxx = nodal_stress(model, u, MATERIAL)[:, 0, 0]
     centre = np.array([p["hole_x"], p["hole_y"]])
@@ -187,7 +208,7 @@ def solve_plate(case: Case, model: FEModel) -> dict:
 def solve_sphere(case: Case, model: FEModel) -> dict:
     a = case.parameters["inner_radius"]
     K = stiffness(model, MATERIAL)
-    r_of = lambda x: np.sqrt((x ** 2).sum(axis=0))                               # noqa: E731
+    r_of = lambda x: np.sqrt((x**2).sum(axis=0))  # noqa: E731
     inner = model.facets(lambda x: np.abs(r_of(x) - a) < 1e-5 * a)
     f = _load(model, inner, lambda n: (-PRESSURE * n[0], -PRESSURE * n[1], -PRESSURE * n[2]))
     fixed = []
@@ -204,8 +225,11 @@ def solve_sphere(case: Case, model: FEModel) -> dict:
     hoop = (np.einsum("nii->n", stress[nodes]) - srr) / 2
     exact = lame(r)[2]
     deviation = (hoop - exact) / lame(a)[2]
-    return {"value": float(1 + deviation.mean()), "worst": float(1 + deviation[np.argmax(np.abs(deviation))]),
-            "iterations": info["iterations"]}
+    return {
+        "value": float(1 + deviation.mean()),
+        "worst": float(1 + deviation[np.argmax(np.abs(deviation))]),
+        "iterations": info["iterations"],
+    }
 
 
 def solve_case(case: Case, model: FEModel) -> dict:
@@ -214,17 +238,26 @@ def solve_case(case: Case, model: FEModel) -> dict:
 
 # ---------------------------------------------------------------------------------------------- meshes
 def fuzzymesh_model(case: Case, series: str, scale: float, seed: int) -> FEModel:
-    data = {"geometry": {"shape": case.shape, "parameters": dict(case.parameters)}, "seed": seed,
-            "size": scale * case.H}
+    data = {
+        "geometry": {"shape": case.shape, "parameters": dict(case.parameters)},
+        "seed": seed,
+        "size": scale * case.H,
+    }
     if series == "recipe":
         h = case.hole
         place = [{"pattern": "uniform-domain"}]
         if case.kind == "plate":
-            place.append({"pattern": "hole", "every": "hole",
-                          "parameters": {"near": h["near"] * scale, "far": h["far"] * scale,
-                                         "extent": h["extent"]}})
-        place += [{"pattern": "thin-wall", "parameters": {"through": 2.0 / scale}},
-                  {"pattern": "curvature", "parameters": {"per_circle": 24.0 / scale}}]
+            place.append(
+                {
+                    "pattern": "hole",
+                    "every": "hole",
+                    "parameters": {"near": h["near"] * scale, "far": h["far"] * scale, "extent": h["extent"]},
+                }
+            )
+        place += [
+            {"pattern": "thin-wall", "parameters": {"through": 2.0 / scale}},
+            {"pattern": "curvature", "parameters": {"per_circle": 24.0 / scale}},
+        ]
         data["place"] = place
     else:
         data["knowledge"] = [str(STUDY_SIZING)]
@@ -234,7 +267,7 @@ def fuzzymesh_model(case: Case, series: str, scale: float, seed: int) -> FEModel
     return FEModel(points, tets10, len(result.mesh.points))
 
 
-GMSH_TO_VTK = [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]    # gmsh tet10: edges 01 12 20 30 32 31 -> VTK 01 12 02 03 13 23
+GMSH_TO_VTK = [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]  # gmsh tet10: edges 01 12 20 30 32 31 -> VTK 01 12 02 03 13 23
 
 
 def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
@@ -262,8 +295,11 @@ def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
             box = occ.addBox(0, 0, 0, 2 * b, 2 * b, 2 * b)
             occ.intersect(shell, [(3, box)])
             occ.synchronize()
-            feature = [s for _, s in gmsh.model.getEntities(2)
-                       if gmsh.model.getType(2, s) == "Sphere" and max(gmsh.model.getBoundingBox(2, s)[3:]) < a * 1.01]
+            feature = [
+                s
+                for _, s in gmsh.model.getEntities(2)
+                if gmsh.model.getType(2, s) == "Sphere" and max(gmsh.model.getBoundingBox(2, s)[3:]) < a * 1.01
+            ]
             near, far, extent = 0.5 * case.H, case.H, (b - a) / 2
         assert feature, "no feature surface found"
         fields = gmsh.model.mesh.field
@@ -291,7 +327,7 @@ def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
     index[tags.astype(np.int64)] = np.arange(len(tags))
     points = coords.reshape(-1, 3)
     tets10 = index[tets][:, GMSH_TO_VTK]
-    used = np.unique(tets10)                                  # drop nodes of no tet, vertices first
+    used = np.unique(tets10)  # drop nodes of no tet, vertices first
     vertex = np.unique(tets10[:, :4])
     order = np.concatenate([vertex, np.setdiff1d(used, vertex)])
     renumber = np.full(len(points), -1, np.int64)
@@ -308,15 +344,23 @@ def measure(case: Case, series: str, scale: float, seed: int = 0) -> dict:
     model = gmsh_model(case, scale, seed) if series == "gmsh" else fuzzymesh_model(case, series, scale, seed)
     meshed = time.perf_counter() - start
     solved = solve_case(case, model)
-    return {"case": case.name, "series": series, "scale": scale, "seed": seed, "nodes": model.vertices,
-            "quadratic_nodes": len(model.points), "tetrahedra": len(model.tets10), **solved,
-            "seconds": {"mesh": round(meshed, 2), "solve": round(time.perf_counter() - start - meshed, 2)}}
+    return {
+        "case": case.name,
+        "series": series,
+        "scale": scale,
+        "seed": seed,
+        "nodes": model.vertices,
+        "quadratic_nodes": len(model.points),
+        "tetrahedra": len(model.tets10),
+        **solved,
+        "seconds": {"mesh": round(meshed, 2), "solve": round(time.perf_counter() - start - meshed, 2)},
+    }
 
 
 # ------------------------------------------------------------------------------------------- analysis
 def reference(case: Case, stored: dict) -> float:
     if case.kind == "sphere":
-        return 1.0                   # values are hoop / Lame's hoop at r = a
+        return 1.0  # values are hoop / Lame's hoop at r = a
     return stored[case.name]["value"]
 
 
@@ -327,7 +371,7 @@ def nodes_at(points: list[dict], target: float, key: str = "error") -> float | N
     error = np.abs([r[key] for r in points])
     above = np.flatnonzero(error > target)
     if len(above) == 0:
-        return -float(points[0]["nodes"])           # negative: already within at the coarsest (an upper bound)
+        return -float(points[0]["nodes"])  # negative: already within at the coarsest (an upper bound)
     if above[-1] == len(points) - 1:
         return None
     k = above[-1]
@@ -353,18 +397,29 @@ def summarise(rows: list[dict], stored: dict, failures: list[dict] = ()) -> dict
             for scale in sorted({r["scale"] for r in group}, reverse=True):
                 g = [r for r in group if r["scale"] == scale]
                 errors = [(r["value"] - ref) / ref for r in g]
-                point = {"scale": scale, "nodes": float(np.mean([r["nodes"] for r in g])), "meshes": len(g),
-                         "value": float(np.mean([r["value"] for r in g])), "error": float(np.mean(errors)),
-                         "worst_seed": float(max(errors, key=abs))}
+                point = {
+                    "scale": scale,
+                    "nodes": float(np.mean([r["nodes"] for r in g])),
+                    "meshes": len(g),
+                    "value": float(np.mean([r["value"] for r in g])),
+                    "error": float(np.mean(errors)),
+                    "worst_seed": float(max(errors, key=abs)),
+                }
                 if case.kind == "sphere":
                     point["worst_node"] = float(max((r["worst"] - 1 for r in g), key=abs))
                 points.append(point)
             key = "worst_node" if case.kind == "sphere" else "worst_seed"
             failed = [r for r in failures if r["case"] == case.name and r["series"] == series]
             out.setdefault(case.name, {})[series] = {
-                "points": points, "reference": ref, "rejected": len(failed), "meshes": len(group) + len(failed),
-                "at_1": nodes_at(points, 0.01, key), "at_3": nodes_at(points, 0.03, key),
-                "at_1_mean": nodes_at(points, 0.01, "error"), "at_3_mean": nodes_at(points, 0.03, "error")}
+                "points": points,
+                "reference": ref,
+                "rejected": len(failed),
+                "meshes": len(group) + len(failed),
+                "at_1": nodes_at(points, 0.01, key),
+                "at_3": nodes_at(points, 0.03, key),
+                "at_1_mean": nodes_at(points, 0.01, "error"),
+                "at_3_mean": nodes_at(points, 0.03, "error"),
+            }
     return out
 
 
@@ -378,49 +433,73 @@ def _count(value) -> str:
 
 def markdown(study: dict) -> str:
     stored, summary = study["references"], study["summary"]
-    lines = ["# Recipe vs uniform vs Gmsh distance field: nodes to reach 1 % and 3 % (issue 15, item 4)", "",
-             "Made by `python bench/fe_study.py` (see its docstring and docs/validation.md). One solver for all "
-             "three series (10-node tets, scikit-fem, CG + AMG, averaged nodal stresses). Node counts are the "
-             "linear mesh's vertices. Seeds: " + ", ".join(map(str, study["seeds"])) + " for fuzzymesh "
-             "(means over the seeds), one Gmsh mesh per scale.", "",
-             "## Nodes from which the error of every seed stays within 1 % and 3 %", "",
-             "| geometry | reference | recipe 1 % | uniform 1 % | gmsh field 1 % "
-             "| recipe 3 % | uniform 3 % | gmsh field 3 % |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "# Recipe vs uniform vs Gmsh distance field: nodes to reach 1 % and 3 % (issue 15, item 4)",
+        "",
+        "Made by `python bench/fe_study.py` (see its docstring and docs/validation.md). One solver for all "
+        "three series (10-node tets, scikit-fem, CG + AMG, averaged nodal stresses). Node counts are the "
+        "linear mesh's vertices. Seeds: " + ", ".join(map(str, study["seeds"])) + " for fuzzymesh "
+        "(means over the seeds), one Gmsh mesh per scale.",
+        "",
+        "## Nodes from which the error of every seed stays within 1 % and 3 %",
+        "",
+        "| geometry | reference | recipe 1 % | uniform 1 % | gmsh field 1 % "
+        "| recipe 3 % | uniform 3 % | gmsh field 3 % |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, per in summary.items():
         case = CASES[name]
         ref = "Lamé (worst inner node)" if case.kind == "sphere" else f"{stored[name]['value']:.4f}"
         cells = [_count(per.get(s, {}).get("at_1")) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         cells += [_count(per.get(s, {}).get("at_3")) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         lines.append(f"| {name} | {ref} | " + " | ".join(cells) + " |")
-    lines += ["", "Same, for the mean over the seeds instead of every seed:", "",
-              "| geometry | recipe 1 % | uniform 1 % | gmsh field 1 % | recipe 3 % | uniform 3 % | gmsh field 3 % |",
-              "|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "Same, for the mean over the seeds instead of every seed:",
+        "",
+        "| geometry | recipe 1 % | uniform 1 % | gmsh field 1 % | recipe 3 % | uniform 3 % | gmsh field 3 % |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, per in summary.items():
         cells = [_count(per[s]["at_1_mean"]) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         cells += [_count(per[s]["at_3_mean"]) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += ["", "Meshes refused by fuzzymesh's acceptance gate (min dihedral 5 deg, Hausdorff) and so missing "
-              "from the series: " + "; ".join(f"{name}: " + ", ".join(f"{s} {d['rejected']} of {d['meshes']}"
-                                                                     for s, d in per.items() if d["rejected"])
-                                              for name, per in summary.items()
-                                              if any(d["rejected"] for d in per.values())) + "."]
-    lines += ["", "'≤ n': already within at the series' coarsest mesh (n nodes); 'not reached': not within at its "
-              "finest. Crossings are interpolated log-log between the last mesh outside and the next.", "",
-              "## Every scale", "",
-              "| geometry | series | scale | nodes | value | error (mean over seeds) | worst seed |",
-              "|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "Meshes refused by fuzzymesh's acceptance gate (min dihedral 5 deg, Hausdorff) and so missing "
+        "from the series: "
+        + "; ".join(
+            f"{name}: " + ", ".join(f"{s} {d['rejected']} of {d['meshes']}" for s, d in per.items() if d["rejected"])
+            for name, per in summary.items()
+            if any(d["rejected"] for d in per.values())
+        )
+        + ".",
+    ]
+    lines += [
+        "",
+        "'≤ n': already within at the series' coarsest mesh (n nodes); 'not reached': not within at its "
+        "finest. Crossings are interpolated log-log between the last mesh outside and the next.",
+        "",
+        "## Every scale",
+        "",
+        "| geometry | series | scale | nodes | value | error (mean over seeds) | worst seed |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, per in summary.items():
         for series, data in per.items():
             for p in data["points"]:
                 extra = f" (worst node {100 * p['worst_node']:+.2f} %)" if "worst_node" in p else ""
-                lines.append(f"| {name} | {series} | {p['scale']:g} | {p['nodes']:,.0f} | {p['value']:.4f} | "
-                             f"{100 * p['error']:+.2f} %{extra} | {100 * p['worst_seed']:+.2f} % |")
+                lines.append(
+                    f"| {name} | {series} | {p['scale']:g} | {p['nodes']:,.0f} | {p['value']:.4f} | "
+                    f"{100 * p['error']:+.2f} %{extra} | {100 * p['worst_seed']:+.2f} % |"
+                )
     lines += ["", "## References", ""]
     for name, ref in stored.items():
         lines.append(f"- {name}: {ref['value']:.4f} ({ref['source']})")
-    lines.append("- sphere: Lamé's hoop stress at r = a (71.43 MPa); the table's value is hoop / Lamé, mean of the "
-                 "inner nodes; the 1 % / 3 % crossings use the worst inner node")
+    lines.append(
+        "- sphere: Lamé's hoop stress at r = a (71.43 MPa); the table's value is hoop / Lamé, mean of the "
+        "inner nodes; the 1 % / 3 % crossings use the worst inner node"
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -438,8 +517,12 @@ def main(argv=None) -> None:
     parser.add_argument("--near", type=float, default=None, help="the hole pattern's near (times r) for the recipe")
     parser.add_argument("--extent", type=float, default=None)
     parser.add_argument("--far", type=float, default=None)
-    parser.add_argument("--rows", type=Path, default=Path(__file__).with_name("fe_study_rows.jsonl"),
-                        help="every measured mesh appended here (resumable)")
+    parser.add_argument(
+        "--rows",
+        type=Path,
+        default=Path(__file__).with_name("fe_study_rows.jsonl"),
+        help="every measured mesh appended here (resumable)",
+    )
     parser.add_argument("--tag", default="shipped", help="label of this run's rows (e.g. a tuned variant)")
     parser.add_argument("--out", type=Path, default=None, help="write OUT.json / OUT.md from the rows of --tag")
     args = parser.parse_args(argv)
@@ -452,11 +535,16 @@ def main(argv=None) -> None:
             row = measure(case, "gmsh", args.reference_scale)
             p = case.parameters
             pet = peterson_kt(2 * p["hole_radius"] / p["width"]) if case.nominal == "net" else None
-            stored[name] = {"value": row["value"], "nodes": row["nodes"], "quadratic_nodes": row["quadratic_nodes"],
-                            "scale": args.reference_scale, "peterson": pet, "seconds": row["seconds"],
-                            "source": f"Gmsh distance field x {args.reference_scale:g}, {row['nodes']:,} nodes "
-                                      f"({row['quadratic_nodes']:,} quadratic)"
-                                      + (f"; Peterson {pet:.4f}" if pet else "")}
+            stored[name] = {
+                "value": row["value"],
+                "nodes": row["nodes"],
+                "quadratic_nodes": row["quadratic_nodes"],
+                "scale": args.reference_scale,
+                "peterson": pet,
+                "seconds": row["seconds"],
+                "source": f"Gmsh distance field x {args.reference_scale:g}, {row['nodes']:,} nodes "
+                f"({row['quadratic_nodes']:,} quadratic)" + (f"; Peterson {pet:.4f}" if pet else ""),
+            }
             REFERENCE_FILE.write_text(json.dumps(stored, indent=1) + "\n")
             print(name, stored[name], flush=True)
         return
@@ -471,10 +559,10 @@ def main(argv=None) -> None:
                 case.hole[key] = getattr(args, key)
         for series in args.series:
             for scale in scales[series]:
-                for seed in (args.seeds if series != "gmsh" else [0]):
+                for seed in args.seeds if series != "gmsh" else [0]:
                     try:
                         row = measure(case, series, scale, seed)
-                    except Exception as error:      # a refused or failed mesh is a data point too
+                    except Exception as error:  # a refused or failed mesh is a data point too
                         row = {"case": name, "series": series, "scale": scale, "seed": seed, "failed": str(error)[:200]}
                     row["tag"] = args.tag
                     row["hole"] = dict(case.hole)
@@ -490,8 +578,14 @@ def write(rows_path: Path, tag: str, out: Path, stored: dict) -> None:
     rows = [r for r in rows if r.get("tag") == tag]
     failures = [r for r in rows if "failed" in r]
     rows = [r for r in rows if "failed" not in r]
-    study = {"tag": tag, "seeds": sorted({r["seed"] for r in rows if r["series"] != "gmsh"}), "references": stored,
-             "summary": summarise(rows, stored, failures), "rows": rows, "failures": failures}
+    study = {
+        "tag": tag,
+        "seeds": sorted({r["seed"] for r in rows if r["series"] != "gmsh"}),
+        "references": stored,
+        "summary": summarise(rows, stored, failures),
+        "rows": rows,
+        "failures": failures,
+    }
     out.parent.joinpath(out.name + ".json").write_text(json.dumps(study, indent=1) + "\n")
     out.parent.joinpath(out.name + ".md").write_text(markdown(study))
 
