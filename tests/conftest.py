@@ -21,7 +21,14 @@ def shape_and_features(kind: str, **parameters):
 
 @pytest.fixture
 def built():
+    """shape_and_features(kind, **parameters) -> (shape, features), cached: do not change what it returns."""
     return shape_and_features
+
+
+@pytest.fixture
+def fresh_features():
+    """fresh_features(kind, **parameters) -> features of their own, for a test that changes them."""
+    return lambda kind, **parameters: shape_and_features.__wrapped__(kind, **parameters)[1]
 
 
 @pytest.fixture(scope="session")

@@ -8,23 +8,22 @@ from scipy.spatial import cKDTree
 from engine.job import job_from_dict
 from engine.knowledge import load_knowledge
 from engine.packing import CURVE, PATCH, VOLUME, get_packer
-from engine.pipeline import build_geometry, build_sizing
+from engine.pipeline import prepare
 
 KB = load_knowledge()
 _CACHE = {}
 
 
-def setup(job):
+def prepared(job: dict):
+    """(geometry, features, sizing) of a job dict, cached (the name 'setup' would be pytest's module setup)."""
     key = repr(job)
     if key not in _CACHE:
-        j = job_from_dict(job)
-        geometry, features = build_geometry(j)
-        _CACHE[key] = geometry, features, build_sizing(j, geometry, features, KB)
+        _CACHE[key] = tuple(prepare(job_from_dict(job)))[1:]
     return _CACHE[key]
 
 
 def pack(job, packer="bubble", **options):
-    geometry, features, sizing = setup(job)
+    geometry, features, sizing = prepared(job)
     return get_packer(packer)(geometry, features, sizing, seed=0, knowledge=KB, **options)
 
 
@@ -47,7 +46,7 @@ JUNCTION = {"geometry": {"shape": "plate_cylinder_junction"}, "size": 12.0, "rec
 
 @pytest.mark.parametrize("job", [CUBE, CYLINDER], ids=["cube", "cylinder"])
 def test_bubbles_settle_at_the_stable_distance(job):
-    _, _, sizing = setup(job)
+    _, _, sizing = prepared(job)
     bubble = pack(job)
     lattice = pack(job, "lattice")
     share, baseline = spacing_share(bubble, sizing, DIAMETER), spacing_share(lattice, sizing)
@@ -63,7 +62,7 @@ def test_bubbles_settle_at_the_stable_distance(job):
 
 
 def test_bubbles_lie_on_their_entities():
-    geometry, features, _ = setup(JUNCTION)
+    geometry, features, _ = prepared(JUNCTION)
     packing = pack(JUNCTION)
     tolerance = 1e-9 * geometry.scale
     for k in np.unique(packing.entity[packing.level == CURVE]):

@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-from conftest import shape_and_features
 
 from engine.cli import main
 from engine.features import classify, detect_features
@@ -80,20 +79,15 @@ def test_dihedral_tests_pick_curves_by_angle_whatever_the_feature_angle(tmp_path
     assert not any("smooth-border" in c.kinds or "concave-edge" in c.kinds for c in features.curves)
 
 
-def _fresh(kind):
-    """A shape's features of its own (the cached ones are shared by other tests)."""
-    return shape_and_features.__wrapped__(kind)[1]
-
-
-def test_dihedral_tests_tell_a_fillets_smooth_borders_from_the_sharp_edges(tmp_path):
-    features = classify(_fresh("l_bracket"), _kinds(tmp_path))
+def test_dihedral_tests_tell_a_fillets_smooth_borders_from_the_sharp_edges(tmp_path, fresh_features):
+    features = classify(fresh_features("l_bracket"), _kinds(tmp_path))
     borders = [c for c in features.curves if "smooth-border" in c.kinds]
     assert len(borders) == 2 and all(not c.sharp for c in borders)
     assert all("right-edge" in c.kinds for c in features.curves if c.sharp and c.convex)
 
 
-def test_a_given_curve_has_no_dihedral_and_passes_no_angle_test(tmp_path):
-    features = classify(_fresh("cracked_plate"), _kinds(tmp_path))
+def test_a_given_curve_has_no_dihedral_and_passes_no_angle_test(tmp_path, fresh_features):
+    features = classify(fresh_features("cracked_plate"), _kinds(tmp_path))
     (front,) = features.named("crack-front")
     assert front.dihedral is None and front.kinds == []
 

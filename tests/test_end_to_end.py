@@ -8,7 +8,6 @@ import meshio
 import numpy as np
 import pytest
 import yaml
-from conftest import shape_and_features
 
 from engine.cli import main
 from engine.shapes import SHAPES
@@ -48,16 +47,16 @@ SIZES = {
 
 
 @pytest.mark.parametrize("kind", sorted(SHAPES))
-def test_every_shape_meshes_from_a_job_file(tmp_path, kind):
+def test_every_shape_meshes_from_a_job_file(tmp_path, kind, built):
     job = write_job(tmp_path, {"geometry": {"shape": kind}, "size": SIZES[kind], "output": {"directory": "result"}})
     assert main(["mesh", str(job), "--quiet"]) == 0
-    shape, _ = shape_and_features(kind)
+    shape, _ = built(kind)
     for name in ("mesh.vtu", "mesh.msh"):
         check_mesh_file(tmp_path / "result" / name, shape.geometry.volume)
 
 
-def test_stl_file_meshes(tmp_path):
-    shape, _ = shape_and_features("l_bracket")
+def test_stl_file_meshes(tmp_path, built):
+    shape, _ = built("l_bracket")
     shape.geometry.mesh.export(tmp_path / "bracket.stl")
     job = write_job(tmp_path, {"geometry": {"file": "bracket.stl"}, "size": 6.0, "output": {"formats": ["vtu"]}})
     assert main(["mesh", str(job), "--quiet"]) == 0
@@ -65,7 +64,7 @@ def test_stl_file_meshes(tmp_path):
     assert not (tmp_path / "out" / "mesh.msh").exists()
 
 
-def test_default_example_as_in_the_readme(tmp_path):
+def test_default_example_as_in_the_readme(tmp_path, built):
     """`fuzzymesh mesh` with no job: the junction near the plate edge, written to ./out."""
     result = subprocess.run(
         [sys.executable, "-m", "engine.cli", "mesh"],
@@ -77,7 +76,7 @@ def test_default_example_as_in_the_readme(tmp_path):
     )
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
-    shape, _ = shape_and_features("plate_cylinder_junction")
+    shape, _ = built("plate_cylinder_junction")
     for name in ("mesh.vtu", "mesh.msh"):
         mesh = check_mesh_file(tmp_path / "out" / name, shape.geometry.volume)
     assert set(mesh.point_data) >= {"node_level", "node_entity"}

@@ -1,28 +1,27 @@
 import numpy as np
 import pytest
-from conftest import shape_and_features
 
 from engine.features import detect_features
 
 
-def test_plate_has_the_corners_edges_and_faces_of_a_box():
-    _, features = shape_and_features("plate")
+def test_plate_has_the_corners_edges_and_faces_of_a_box(built):
+    _, features = built("plate")
     assert (len(features.corners), len(features.curves), len(features.patches)) == (8, 12, 6)
     assert {"top", "bottom", "x-min", "x-max", "y-min", "y-max"} <= set(features.names)
     lengths = sorted(round(c.length, 6) for c in features.curves)
     assert lengths == [20.0] * 4 + [200.0] * 8
 
 
-def test_ids_are_stable():
-    shape, features = shape_and_features("plate_cylinder_junction")
+def test_ids_are_stable(built):
+    shape, features = built("plate_cylinder_junction")
     again = detect_features(shape.geometry, 30.0)
     assert [c.id for c in again.curves] == [c.id for c in features.curves]
     assert all(np.array_equal(a.points, b.points) for a, b in zip(again.curves, features.curves))
     assert [p.id for p in again.patches] == [p.id for p in features.patches]
 
 
-def test_circular_curves_carry_centre_axis_and_radius():
-    _, features = shape_and_features("cylinder", radius=25, height=100)
+def test_circular_curves_carry_centre_axis_and_radius(built):
+    _, features = built("cylinder", radius=25, height=100)
     assert len(features.curves) == 2 and len(features.corners) == 0
     for curve in features.curves:
         assert curve.closed and curve.circle is not None
@@ -36,8 +35,8 @@ def test_circular_curves_carry_centre_axis_and_radius():
     "kind,name,radius",
     [("cylinder", "top-edge", 25), ("plate_with_hole", "hole", 10), ("plate_cylinder_junction", "junction", 25)],
 )
-def test_faceting_chordal_error_is_at_most_a_thousandth_of_the_radius(kind, name, radius):
-    _, features = shape_and_features(kind)
+def test_faceting_chordal_error_is_at_most_a_thousandth_of_the_radius(kind, name, radius, built):
+    _, features = built(kind)
     curve = next(c for c in features.named(name) if hasattr(c, "closed"))
     line = curve.polyline
     mid = 0.5 * (line[1:] + line[:-1])
@@ -45,8 +44,8 @@ def test_faceting_chordal_error_is_at_most_a_thousandth_of_the_radius(kind, name
     assert gap.max() <= 1e-3 * radius * (1 + 1e-9)
 
 
-def test_arc_length_parametrisation():
-    _, features = shape_and_features("cylinder", radius=10, height=5)
+def test_arc_length_parametrisation(built):
+    _, features = built("cylinder", radius=10, height=5)
     curve = features.curves[0]
     s = np.linspace(0, curve.length, 50, endpoint=False)
     points = curve.point_at(s)
@@ -54,28 +53,28 @@ def test_arc_length_parametrisation():
     assert np.allclose(curve.point_at(curve.length), curve.point_at(0.0))
 
 
-def test_junction_is_a_concave_circle_and_plate_edge_is_the_near_side():
-    _, features = shape_and_features("plate_cylinder_junction", offset=60)
+def test_junction_is_a_concave_circle_and_plate_edge_is_the_near_side(built):
+    _, features = built("plate_cylinder_junction", offset=60)
     (junction,) = features.named("junction")
     assert junction.convex is False and junction.circle.radius == pytest.approx(25, rel=1e-6)
     assert junction.circle.centre == pytest.approx([60, 0, 20], abs=1e-6)
     (edge,) = features.named("plate-edge")
     assert edge.normal == pytest.approx([1, 0, 0]) and edge.centroid[0] == pytest.approx(100)
-    _, mirrored = shape_and_features("plate_cylinder_junction", offset=-60)
+    _, mirrored = built("plate_cylinder_junction", offset=-60)
     (edge,) = mirrored.named("plate-edge")
     assert edge.normal == pytest.approx([-1, 0, 0])
 
 
-def test_fillet_is_its_own_patch_with_its_area():
-    _, features = shape_and_features("l_bracket", fillet_radius=8, width=40)
+def test_fillet_is_its_own_patch_with_its_area(built):
+    _, features = built("l_bracket", fillet_radius=8, width=40)
     (fillet,) = features.named("fillet")
     assert fillet.area == pytest.approx(np.pi / 2 * 8 * 40, rel=2e-3)
     assert not fillet.planar
 
 
 @pytest.mark.parametrize("crack", ["straight", "semi-elliptical"])
-def test_crack_front_lies_inside_the_plate(crack):
-    shape, features = shape_and_features("cracked_plate", crack=crack)
+def test_crack_front_lies_inside_the_plate(crack, built):
+    shape, features = built("cracked_plate", crack=crack)
     (front,) = features.named("crack-front")
     assert not front.on_surface
     inner = front.points[1:-1]

@@ -1,13 +1,12 @@
 import numpy as np
 import pytest
 import trimesh
-from conftest import shape_and_features
 
 from engine.geometry import load_surface, validate_surface
 
 
-def test_inside_test_agrees_with_exact_signed_distance():
-    shape, _ = shape_and_features("plate_cylinder_junction")
+def test_inside_test_agrees_with_exact_signed_distance(built):
+    shape, _ = built("plate_cylinder_junction")
     geometry = shape.geometry
     points = np.random.default_rng(3).uniform(*geometry.bounds, size=(200_000, 3))
     fast = geometry.contains(points)
@@ -16,8 +15,8 @@ def test_inside_test_agrees_with_exact_signed_distance():
     assert np.array_equal(fast, exact)
 
 
-def test_inside_test_on_points_hugging_the_surface():
-    shape, _ = shape_and_features("cylinder")
+def test_inside_test_on_points_hugging_the_surface(built):
+    shape, _ = built("cylinder")
     geometry = shape.geometry
     rng = np.random.default_rng(0)
     on_surface, _ = trimesh.sample.sample_surface(geometry.mesh, 20_000, seed=1)
@@ -27,15 +26,15 @@ def test_inside_test_on_points_hugging_the_surface():
     assert not geometry.contains(on_surface + offset * normals).any()
 
 
-def test_signed_distance_is_positive_inside_and_exact_for_a_box():
-    shape, _ = shape_and_features("plate", length=100, width=60, thickness=10)
+def test_signed_distance_is_positive_inside_and_exact_for_a_box(built):
+    shape, _ = built("plate", length=100, width=60, thickness=10)
     geometry = shape.geometry
     points = np.array([[0, 0, 5], [0, 0, 12], [49, 0, 5], [60, 0, 5]])
     assert np.allclose(geometry.signed_distance(points), [5, -2, 1, -10])
 
 
-def test_closest_point_lies_on_the_surface():
-    shape, _ = shape_and_features("cylinder")
+def test_closest_point_lies_on_the_surface(built):
+    shape, _ = built("cylinder")
     geometry = shape.geometry
     points = np.random.default_rng(1).uniform(*geometry.bounds, size=(5000, 3))
     closest, distance, face = geometry.closest_point(points)
@@ -46,8 +45,8 @@ def test_closest_point_lies_on_the_surface():
 
 
 @pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply", ".off", ".glb"])
-def test_every_surface_format_loads_as_the_same_solid(tmp_path, suffix):
-    shape, _ = shape_and_features("plate_with_hole")
+def test_every_surface_format_loads_as_the_same_solid(tmp_path, suffix, built):
+    shape, _ = built("plate_with_hole")
     path = tmp_path / f"part{suffix}"
     shape.geometry.mesh.export(path)
     geometry = load_surface(path)

@@ -4,7 +4,6 @@ import meshio
 import numpy as np
 import pytest
 import yaml
-from conftest import shape_and_features
 
 from engine.cli import main
 from engine.knowledge import load_knowledge
@@ -30,7 +29,7 @@ def edge_lengths(mesh):
 
 
 @pytest.mark.parametrize("recipe", sorted(CASES))
-def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe):
+def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe, built):
     shape_name, parameters, size, feature_name = CASES[recipe]
     job = tmp_path / "job.yaml"
     job.write_text(
@@ -47,7 +46,7 @@ def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe):
     mesh = meshio.read(tmp_path / "out" / "mesh.vtu")
     p = mesh.points[mesh.cells_dict["tetra"]]
     volumes = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
-    shape, features = shape_and_features(shape_name, **parameters)
+    shape, features = built(shape_name, **parameters)
     assert (volumes > 0).all()
     assert volumes.sum() == pytest.approx(shape.geometry.volume, rel=0.01)
     # edges near the feature are clearly shorter than the global size, far ones are not
