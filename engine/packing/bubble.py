@@ -38,7 +38,7 @@ from ..sizing import NODES_PER_H3
 from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
 from .forces import deletions, forces, morton_order, neighbour_lists, proximity, update_neighbours
-from .lattice import _corner_nodes, _curve_nodes, _patch_nodes, _volume_nodes
+from .start import corner_nodes, curve_nodes, patch_nodes, volume_nodes
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
     bubbles = _Scaled(sizing, control.settings["diameter"])  # bubble diameters d = c h
     events: list[np.ndarray] = []  # EVENT rows, a block per control round
     timings, counters = {}, {"next_id": 0}
-    corners = _corner_nodes(features, sizing)
+    corners = corner_nodes(features, sizing)
     parts = [_with_ids(corners, counters)]
     constraints = {
         CURVE: CurveConstraint(features),
@@ -175,10 +175,10 @@ def _initial(level, geometry, features, bubbles, frozen, rng, density):
     NODES_PER_H3 c^3 per bubble diameter cubed."""
     scaled = _Scaled(bubbles, density ** (-1.0 / {CURVE: 1, PATCH: 2, VOLUME: 3}[level]))
     if level == CURVE:
-        return _curve_nodes(features, scaled, existing=frozen.points)
+        return curve_nodes(features, scaled, existing=frozen.points)
     if level == PATCH:
-        return _patch_nodes(geometry, features, scaled, frozen, rng)
-    return _volume_nodes(geometry, bubbles, frozen, rng, density=NODES_PER_H3 * bubbles.factor**3 * density)
+        return patch_nodes(geometry, features, scaled, frozen, rng)
+    return volume_nodes(geometry, bubbles, frozen, rng, density=NODES_PER_H3 * bubbles.factor**3 * density)
 
 
 class _Scaled:
