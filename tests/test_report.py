@@ -95,7 +95,7 @@ def test_the_cuts_go_through_the_finest_element_at_the_junction(meshed):
     assert 80 < finest.point[0] < 100 and abs(finest.point[1]) < 5
     assert sorted(axis for axis, _ in finest.planes) == [1, 2], "the planes y = const and z = const"
     titles = re.findall(r"<h2>(Cut at [^<]*)</h2>", page_of(out))
-    assert titles == [f"Cut at y = {finest.planes[0][1]:.4g}", f"Cut at z = {finest.planes[1][1]:.4g}"]
+    assert titles == [f"Cut at {'xyz'[axis]} = {value:.4g}" for axis, value in finest.planes]
     assert f"h = {h[finest.element]:.4g}" in page_of(out) and "on curve-8 (junction)" in page_of(out)
 
 
