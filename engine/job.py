@@ -197,7 +197,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
 
 def default_job() -> Job:
     """The built-in example, the paper's Fig. 10 (b): the plate-cylinder junction with the cylinder near the plate
-    edge, sized by the recipe junction-edge at H = 12 (about 60,000 tetrahedra in a few seconds)."""
+    edge, sized by the recipe junction-edge at H = 12 (about 91,000 tetrahedra in about seven seconds)."""
     return job_from_dict(
         {"geometry": {"shape": "plate_cylinder_junction"}, "recipe": "junction-edge", "size": 12.0},
         base_dir=Path.cwd(),
