@@ -122,6 +122,24 @@ def build(result) -> Model:
     return Model(result, points, tets10, triangles6, tet_boundary(result.mesh)[2], mesh, basis, dof)
 
 
+def run_figures(result, solved: dict, meshing: float, load: float | None = None) -> dict:
+    """The figures of a validation run: the mesh's and the model's sizes, the solver's iterations, with ``load``
+    the largest reaction over it, and the stages' seconds (``meshing``; ``solved``: a case's solve, with its
+    ``model``, ``solver`` figures and ``timings``)."""
+    model, solver = solved["model"], solved["solver"]
+    return {
+        "nodes": model.nodes,
+        "tetrahedra": len(result.mesh.tets),
+        "quadratic nodes": len(model.points),
+        "dofs": int(model.basis.N),
+        "CG iterations": solver["iterations"],
+        **({} if load is None else {"max reaction / load": solver["reaction"] / load}),
+        "mesh s": round(meshing, 1),
+        "assemble s": round(solved["timings"]["assemble"], 1),
+        "solve s": round(solved["timings"]["solve"], 1),
+    }
+
+
 def stiffness(model: Model, material: Material):
     from skfem import asm
     from skfem.models.elasticity import linear_elasticity

@@ -27,7 +27,7 @@ from ..job import job_from_dict
 from ..pipeline import SIZE_FROM_SCALE
 from ..pipeline import run as mesh_job
 from . import CaseResult, Row
-from .elasticity import Material, build, nodal_stress, solve, stiffness, surface_load
+from .elasticity import Material, build, nodal_stress, run_figures, solve, stiffness, surface_load
 
 MATERIAL = Material(E=200e3, nu=0.3)  # steel, MPa
 TENSION = 100.0  # MPa on the end faces
@@ -168,19 +168,9 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
     result = mesh_job(job_from_dict(job(scale, seed=seed), source="<validate plate-hole>"), write=False)
     meshing = time.perf_counter() - start
     solved = solve_plate(result)
-    model, d_over_w = solved["model"], 2 * PLATE["hole_radius"] / PLATE["width"]
+    d_over_w = 2 * PLATE["hole_radius"] / PLATE["width"]
     reference = peterson_kt(d_over_w)
-    facts = {
-        "nodes": model.nodes,
-        "tetrahedra": len(result.mesh.tets),
-        "quadratic nodes": len(model.points),
-        "dofs": int(model.basis.N),
-        "CG iterations": solved["solver"]["iterations"],
-        "max reaction / load": solved["solver"]["reaction"] / solved["load"],
-        "mesh s": round(meshing, 1),
-        "assemble s": round(solved["timings"]["assemble"], 1),
-        "solve s": round(solved["timings"]["solve"], 1),
-    }
+    facts = run_figures(result, solved, meshing, solved["load"])
     title = (
         f"plate-hole: plate {PLATE['length']:g} x {PLATE['width']:g} x {PLATE['thickness']:g}, central hole "
         f"d = {2 * PLATE['hole_radius']:g} (d/W = {d_over_w:g}), tension {TENSION:g} MPa; "

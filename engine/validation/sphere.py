@@ -22,7 +22,7 @@ import numpy as np
 from ..job import job_from_dict
 from ..pipeline import run as mesh_job
 from . import CaseResult, Row
-from .elasticity import Material, build, displacement, nodal_stress, solve, stiffness, surface_load
+from .elasticity import Material, build, displacement, nodal_stress, run_figures, solve, stiffness, surface_load
 
 MATERIAL = Material(E=200e3, nu=0.3)  # MPa
 PRESSURE = 100.0  # MPa on the inner surface
@@ -80,17 +80,7 @@ def run(scale: float = 1.0, seed: int = 0) -> CaseResult:
     result = mesh_job(job_from_dict(job(scale, seed), source="<validate sphere>"), write=False)
     meshing = time.perf_counter() - start
     solved = solve_sphere(result)
-    model = solved["model"]
-    facts = {
-        "nodes": model.nodes,
-        "tetrahedra": len(result.mesh.tets),
-        "quadratic nodes": len(model.points),
-        "dofs": int(model.basis.N),
-        "CG iterations": solved["solver"]["iterations"],
-        "mesh s": round(meshing, 1),
-        "assemble s": round(solved["timings"]["assemble"], 1),
-        "solve s": round(solved["timings"]["solve"], 1),
-    }
+    facts = run_figures(result, solved, meshing)
     title = (
         f"sphere: thick hollow sphere a = {INNER:g}, b = {OUTER:g} (octant, symmetry planes), internal "
         f"pressure {PRESSURE:g} MPa; uniform h = {job(scale)['size']:.3g}; 10-node tets"
