@@ -187,9 +187,10 @@ def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tup
 
 
 def quadratic(
-    mesh: TetMesh, geometry, features, floor: float = QUADRATIC_FLOOR
+    mesh: TetMesh, geometry, features, floor: float = QUADRATIC_FLOOR, boundary: tuple | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`).
+    """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`;
+    ``boundary``: its (owner, side, patch) if already at hand, else computed).
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
     (:mod:`engine.exact`: a plane, cylinder, sphere or cone), else onto the input surface; a curve's chords onto
@@ -197,7 +198,7 @@ def quadratic(
     (a smooth cut). Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
     only part of the way (:func:`limit_curving`).
     """
-    owner, side, patch = tet_boundary(mesh)
+    owner, side, patch = boundary if boundary is not None else tet_boundary(mesh)
     unique, tets10, triangles6 = quadratic_elements(mesh, (owner, side))
     straight = mesh.points[unique].mean(axis=1)
     curved = straight.copy()

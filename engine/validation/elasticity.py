@@ -114,12 +114,13 @@ def build(result) -> Model:
     """
     from skfem import Basis, ElementTetP2, ElementVector, MeshTet2
 
-    points, tets10, triangles6 = quadratic(result.mesh, result.geometry, result.features)
+    boundary = tet_boundary(result.mesh)
+    points, tets10, triangles6 = quadratic(result.mesh, result.geometry, result.features, boundary=boundary)
     mesh = MeshTet2(np.ascontiguousarray(points.T), np.ascontiguousarray(tets10.T))
     basis = Basis(mesh, ElementVector(ElementTetP2()), intorder=QUADRATURE_ORDER)
     dof = np.empty(len(points), np.int64)
     dof[tets10] = (basis.element_dofs[::3] // 3).T  # the element's local node order is tets10's
-    return Model(result, points, tets10, triangles6, tet_boundary(result.mesh)[2], mesh, basis, dof)
+    return Model(result, points, tets10, triangles6, boundary[2], mesh, basis, dof)
 
 
 def run_figures(result, solved: dict, meshing: float, load: float | None = None) -> dict:
