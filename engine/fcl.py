@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .errors import KnowledgeError
 from .fuzzy import RuleBase
-from .yamlfile import Located, parse_yaml
+from .yamlfile import Located, parse_yaml, read_text
 
 IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 TOKEN = re.compile(
@@ -429,14 +429,7 @@ def _clauses(tokens: _Tokens, start, joiner: str) -> Located:
 def load_fcl(path: str | Path) -> Located:
     """Read an FCL file as the located tree of a rules file; unreadable files and syntax errors are one line."""
     path = Path(path)
-    source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise KnowledgeError(
-            f"cannot read the file ({exc.__class__.__name__})", where=source, fix="give a readable UTF-8 FCL file"
-        ) from None
-    return parse_fcl(text, source)
+    return parse_fcl(read_text(path, "FCL", KnowledgeError), str(path))
 
 
 __all__ = ["to_fcl", "parse_fcl", "load_fcl"]

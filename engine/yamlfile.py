@@ -122,19 +122,26 @@ def parse_yaml(text: str, source: str, error=FuzzymeshError):
         raise error(f"invalid YAML: {exc}", where=source, fix="fix the YAML syntax") from None
 
 
+def read_text(path: Path, kind: str, error=FuzzymeshError) -> str:
+    """The UTF-8 text of the file ``path``; one that cannot be read is an ``error`` located at the file (``kind``:
+    what it should be, for the fix: "YAML", "FCL")."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(
+            f"cannot read the file ({exc.__class__.__name__})",
+            where=str(path),
+            fix=f"give a readable UTF-8 {kind} file",
+        ) from None
+
+
 def load_yaml(path: str | Path, error=FuzzymeshError):
     """Read a YAML file safely; a missing, unreadable or empty file is an ``error``."""
     path = Path(path)
     source = str(path)
     if not path.is_file():
         raise error("file not found", where=source, fix="check the path")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(
-            f"cannot read the file ({exc.__class__.__name__})", where=source, fix="give a readable UTF-8 YAML file"
-        ) from None
-    data = parse_yaml(text, source, error)
+    data = parse_yaml(read_text(path, "YAML", error), source, error)
     if data is None:
         raise error("the file is empty", where=f"{source}:1:1", fix="write the YAML content")
     return data
