@@ -10,8 +10,9 @@ written as STEP by Gmsh's OpenCASCADE:
 - Gmsh on the STEP file in its own subprocess: ``importShapes``, ``Mesh.MeshSizeMax`` = the same size,
   ``Mesh.MeshSizeFromCurvature`` = 24 (elements per full turn, as fuzzymesh's curvature rule), 3-D Delaunay.
 
-Every mesh is measured here the same way (``bench/parts.py``): tets, minimum dihedral angle, volume against
-the CAD's (``occ.getMass``). One run per case. Writes ``bench/cad.json`` and ``bench/cad.md``.
+Every mesh is measured here the same way: tets and minimum dihedral angle as ``bench/parts.py`` does, volume
+by the engine's code (``engine.mesh.signed_volumes``) against the CAD's (``occ.getMass``). One run per case.
+Writes ``bench/cad.json`` and ``bench/cad.md``.
 
     python bench/cad.py [--work DIR] [--timeout 300]
 """
@@ -32,6 +33,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+
+from engine.mesh import signed_volumes
 
 HERE = Path(__file__).resolve().parent
 PER_TURN = 24  # elements per full turn: fuzzymesh's always-placed curvature rule, given to Gmsh too
@@ -138,6 +141,7 @@ def bench(work: Path, timeout: float) -> dict:
             mesh = result.pop("mesh", None)
             if mesh is not None and len(mesh[1]):
                 figures = parts.tet_measures(*mesh)
+                figures["volume"] = abs(float(signed_volumes(*mesh).sum()))  # the engine's (engine.mesh)
                 figures["volume_error_cad"] = figures["volume"] / part["cad_volume"] - 1
                 result.update(figures)
         rows.append({"name": name, "size": size, "cad_volume": part["cad_volume"], **runs})
