@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -253,6 +254,19 @@ def curve_surfaces(geometry, features, surfaces: list) -> list[list]:
     return out
 
 
+class ExactSurfaces(NamedTuple):
+    """A solid's exact surfaces, fitted once (:func:`fit_exact`) and passed on from stage to stage."""
+
+    patches: list  # per patch: its exact surface or None (exact_surfaces)
+    curves: list[list]  # per curve: the exact surfaces it lies on, or [] (curve_surfaces)
+
+
+def fit_exact(geometry, features) -> ExactSurfaces:
+    """The exact surfaces of the patches and of the curves of ``features``."""
+    surfaces = exact_surfaces(geometry, features)
+    return ExactSurfaces(surfaces, curve_surfaces(geometry, features, surfaces))
+
+
 def onto_intersection(surfaces: list, x: np.ndarray) -> np.ndarray:
     """Points (k, 3) moved onto the common line of ``surfaces`` by alternating projections (one surface:
     its closest points)."""
@@ -264,9 +278,10 @@ def onto_intersection(surfaces: list, x: np.ndarray) -> np.ndarray:
 
 def on_exact_surfaces(mesh, geometry, features):
     """The mesh with its curve and patch nodes on their exact surfaces (module docstring); nodes of a tet
-    the move would leave with a non-positive volume stay where they were. Returns (mesh, stats)."""
-    surfaces = exact_surfaces(geometry, features)
-    along = curve_surfaces(geometry, features, surfaces)
+    the move would leave with a non-positive volume stay where they were. Returns (mesh, stats, exact):
+    ``exact`` the fitted surfaces (:func:`fit_exact`), for the stages after this one (the 10-node elements)."""
+    exact = fit_exact(geometry, features)
+    surfaces, along = exact
     points = mesh.points.copy()
     for level, table in (("patch", [[s] if s is not None else [] for s in surfaces]), ("curve", along)):
         nodes = np.flatnonzero((mesh.node_level == Level[level.upper()]) & (mesh.node_entity >= 0))
@@ -288,4 +303,4 @@ def on_exact_surfaces(mesh, geometry, features):
         "largest_move": float(distance.max(initial=0.0)),
         "nodes_kept_for_validity": int(kept.sum()),
     }
-    return dataclasses.replace(mesh, points=points), stats
+    return dataclasses.replace(mesh, points=points), stats, exact

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from .exact import curve_surfaces, exact_surfaces, onto_intersection
+from .exact import ExactSurfaces, fit_exact, onto_intersection
 from .levels import CORNER, CURVE
 from .mesh import FACES, TetMesh
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
@@ -187,10 +187,16 @@ def curve_edges(mesh: TetMesh, features, faces: np.ndarray | None = None) -> tup
 
 
 def quadratic(
-    mesh: TetMesh, geometry, features, floor: float = QUADRATIC_FLOOR, boundary: tuple | None = None
+    mesh: TetMesh,
+    geometry,
+    features,
+    floor: float = QUADRATIC_FLOOR,
+    boundary: tuple | None = None,
+    exact: ExactSurfaces | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ten-node tetrahedra: (points, tets10 in TET10_EDGES order, boundary triangle6 (t, 6) of :func:`tet_boundary`;
-    ``boundary``: its (owner, side, patch) if already at hand, else computed).
+    ``boundary``: its (owner, side, patch) if already at hand, else computed; ``exact``: the solid's fitted exact
+    surfaces (:func:`engine.exact.fit_exact`, as the pipeline's exact stage returns them), else fitted here).
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
     (:mod:`engine.exact`: a plane, cylinder, sphere or cone), else onto the input surface; a curve's chords onto
@@ -205,12 +211,11 @@ def quadratic(
     on_boundary = np.unique(triangles6[:, 3:]) - len(mesh.points)
     if len(on_boundary):
         curved[on_boundary] = geometry.closest_point(straight[on_boundary])[0]
-    surfaces = exact_surfaces(geometry, features)
+    surfaces, along = fit_exact(geometry, features) if exact is None else exact
     for p in np.unique(patch[patch >= 0]):
         if surfaces[p] is not None:
             rows = np.unique(triangles6[patch == p, 3:]) - len(mesh.points)
             curved[rows] = surfaces[p].project(straight[rows])
-    along = curve_surfaces(geometry, features, surfaces)
     chords, curve = curve_edges(mesh, features, triangles6[:, :3])
     chord_row = row_index(unique, np.sort(chords, axis=1))
     for c in np.unique(curve):

@@ -17,7 +17,7 @@ from .atomic import write_all_or_nothing
 from .audit import Audit, audit_mesh, idle_patterns
 from .cad import CAD_FORMATS, load_cad
 from .errors import JobError, LimitError, MeshRejected
-from .exact import on_exact_surfaces
+from .exact import ExactSurfaces, on_exact_surfaces
 from .fe import feature_groups, quadratic, tet_bodies
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
@@ -129,11 +129,12 @@ def fe_model(
     features: Features,
     audit: Audit | None = None,
     floor: float = QUADRATIC_FLOOR,
+    exact: ExactSurfaces | None = None,
 ) -> FEModel:
     """The mesh as the files hold it: the job's element order (10-node elements curved no further than a
-    scaled Jacobian of ``floor``), the bodies' and features' named groups, the audit, and the cell field
-    ``body`` (1-based)."""
-    quadratic_elements = quadratic(mesh, geometry, features, floor) if job.output_order == 2 else None
+    scaled Jacobian of ``floor``, onto the ``exact`` surfaces the exact stage fitted, else fitted here), the
+    bodies' and features' named groups, the audit, and the cell field ``body`` (1-based)."""
+    quadratic_elements = quadratic(mesh, geometry, features, floor, exact=exact) if job.output_order == 2 else None
     body = tet_bodies(mesh, geometry)
     model = FEModel.build(mesh, feature_groups(mesh, features, body), quadratic_elements, audit)
     model.cell_data["body"] = (body + 1).astype(np.int32)
@@ -273,7 +274,7 @@ def run(
         timings["meshing"],
     )
     with stage("exact", timings):
-        mesh, moved = on_exact_surfaces(mesh, geometry, features)
+        mesh, moved, exact = on_exact_surfaces(mesh, geometry, features)
     log.info(
         "exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder, sphere or cone; %d nodes moved "
         "onto them, at most %.3g%s (%.2f s)",
@@ -370,7 +371,7 @@ def run(
     )
     tolerances = kb.sizing["acceptance"]
     model = (
-        fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian)
+        fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian, exact)
         if write or job.output_order == 2
         else None
     )
