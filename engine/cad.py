@@ -1,9 +1,10 @@
 """CAD input: STEP, IGES and BREP solids read through Gmsh's OpenCASCADE kernel.
 
 :func:`load_cad` imports the file (STEP and IGES converted to millimetres, OpenCASCADE's default; a file
-without a solid is healed: faces sewn, solids made), fragments several solids (touching ones, which would
-share a face, are refused) and tessellates the CAD faces with OpenCASCADE's BRepMesh (Gmsh's 2-D mesher where
-that is not a valid solid) into one closed surface whose triangles know their CAD face. The
+without a solid is healed: faces sewn, solids made), fragments several solids (touching ones, which share a
+face after the fragment, are refused unless asked for as an assembly: see :class:`Assembly`) and tessellates
+the CAD faces with OpenCASCADE's BRepMesh (Gmsh's 2-D mesher where that is not a valid solid) into one closed
+surface whose triangles know their CAD face. The
 :class:`Geometry` is that surface; the :class:`Features` are found on it with every CAD face a patch of its
 own (adjacent faces of one cylinder, cone, sphere or torus, as exporters split periodic faces, make one
 patch), so every CAD edge between two faces is a curve. Patches and curves are then named from the file (its
@@ -41,6 +42,7 @@ DEFLECTION = 1e-3  # tessellation: largest sagitta, x the model size
 MESHER_SIZE = 40  # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
 HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are sewn across gaps this wide
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
+UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
 
 
@@ -97,8 +99,37 @@ class CadEntity:
         return self.model.closest(self.dim, self.tags, x)
 
 
-def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_solids: bool = False):
-    """(Geometry, Features) of a STEP, IGES or BREP file (module docstring)."""
+@dataclass
+class Interface:
+    """CAD faces two solids share (after OpenCASCADE's fragment): ``bodies`` (a, b), 0-based, a < b."""
+
+    name: str
+    bodies: tuple
+    faces: tuple  # CAD face tags
+
+
+@dataclass
+class Assembly:
+    """Touching solids of a CAD file: each body's own (Geometry, Features), its name (from the file, else
+    ``solid-N``), the CAD face tags of each of its patches and the CAD edge tags of each of its curves (the
+    union's as ``union_patch_faces`` / ``union_curve_edges``), and the shared faces."""
+
+    names: list
+    bodies: list  # (Geometry, Features) per body
+    patch_faces: list  # per body, per patch: tuple of CAD face tags
+    curve_edges: list  # per body, per curve: tuple of CAD edge tags
+    union_patch_faces: list
+    union_curve_edges: list
+    interfaces: list  # Interface
+    shared_faces: frozenset
+
+
+def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_solids: bool = False, assembly=False):
+    """(Geometry, Features) of a STEP, IGES or BREP file (module docstring). Touching solids, with ``assembly``
+    (and ``allow_multiple_solids``): the Geometry is their union's outer surface, each face's body the solid it
+    bounds, and ``Features.assembly`` holds each solid's own (Geometry, Features) and the shared faces, for
+    :func:`engine.assembly.mesh_assembly`; without ``assembly`` they are refused (the pipeline does not mesh
+    them yet)."""
     path = Path(path)
     source = str(path)
     if path.suffix.lower() not in CAD_FORMATS:
@@ -111,40 +142,67 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         raise GeometryError("file not found", where=source, fix="check the path")
     model = CadModel(str(path.resolve()), f"fuzzymesh-cad:{path.resolve()}")
     with model.current() as gm:
-        solids = gm.getEntities(3)
-        if not solids:
+        solids = np.array([tag for _, tag in gm.getEntities(3)])
+        if not len(solids):
             raise GeometryError(
                 "the file holds no solid (and its faces could not be sewn into one)",
                 where=source,
                 fix="export the part as a solid body",
             )
+        faces = np.array([tag for _, tag in gm.getEntities(2)])
+        face_solids = [tuple(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist()) for tag in faces]
+        shared = [k for k, owners in enumerate(face_solids) if len(owners) > 1]
+        touching = len({b for k in shared for b in face_solids[k]})
         if len(solids) > 1 and not allow_multiple_solids:
             raise GeometryError(
-                f"the file holds {len(solids)} solids",
+                f"the file holds {len(solids)} solids"
+                + (f", {touching} of which touch (they share {len(shared)} faces)" if shared else ""),
                 where=source,
-                fix="mesh them one at a time, or set 'allow_multiple_solids: true' in the job's geometry",
+                fix="set 'allow_multiple_solids: true' in the job's geometry to mesh each solid as a body"
+                + (" with conforming interfaces" if shared else "")
+                + ", or mesh them one at a time",
             )
-        faces = np.array([tag for _, tag in gm.getEntities(2)])
-        surfaces = [_surface(gm.getType(2, tag), gm.getEntityProperties(2, tag)[1]) for tag in faces]
-        face_names = [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces]
-        edges = np.array([tag for _, tag in gm.getEntities(1)])
-        edge_names = [_label(gm.getEntityName(1, tag)) or f"edge-{tag}" for tag in edges]
-        edge_faces = [np.searchsorted(faces, gm.getAdjacencies(1, tag)[0]).tolist() for tag in edges]
-        shared = [tag for tag in faces if len(gm.getAdjacencies(2, tag)[0]) > 1]
-        if shared:
+        if shared and not assembly:
             raise GeometryError(
-                f"solids of the file touch (they share face-{shared[0]} and {len(shared) - 1} more): "
-                "a conforming interface between solids is not supported yet",
+                f"{touching} of the file's {len(solids)} solids touch (they share {len(shared)} faces, the first "
+                f"face-{faces[shared[0]]}): the pipeline does not mesh an assembly with conforming interfaces yet",
                 where=source,
-                fix="fuse them into one solid in the CAD tool, or mesh them one at a time",
+                fix="fuse the touching solids into one in the CAD tool, move them apart, or mesh them one at a time",
             )
+        solid_names = [_solid_name(gm.getEntityName(3, tag)) or f"solid-{k + 1}" for k, tag in enumerate(solids)]
+        cad = _CadFaces(
+            source,
+            model,
+            faces,
+            [_surface(gm.getType(2, tag), gm.getEntityProperties(2, tag)[1]) for tag in faces],
+            [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces],
+            face_solids,
+            np.array([tag for _, tag in gm.getEntities(1)]),
+            feature_angle,
+        )
+        cad.edge_names = [_label(gm.getEntityName(1, tag)) or f"edge-{tag}" for tag in cad.edges]
+        cad.edge_faces = [np.searchsorted(faces, gm.getAdjacencies(1, tag)[0]).tolist() for tag in cad.edges]
+    outer = np.array([len(owners) == 1 for owners in face_solids])
     for mesher in (False, True):
         with model.current() as gm:
             vertices, triangles, face_tag = _tessellate(gm, mesher)
-        face = np.searchsorted(faces, face_tag)  # per triangle, index into faces
         try:
-            geometry = validate_surface(
-                vertices, _oriented(vertices, triangles, face), source, allow_multiple_solids=allow_multiple_solids
+            geometry, features, patch_faces, curve_edges = cad.solid(
+                vertices, triangles, np.searchsorted(faces, face_tag), outer, allow_multiple_solids
+            )
+            bodies = (
+                [
+                    cad.solid(
+                        vertices,
+                        triangles,
+                        np.searchsorted(faces, face_tag),
+                        np.array([b in owners for owners in face_solids]),
+                        False,
+                    )
+                    for b in range(len(solids))
+                ]
+                if shared
+                else []
             )
             break
         except GeometryError as error:
@@ -156,31 +214,97 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 source,
                 error.what,
             )
-    if len(geometry.faces) != len(face):
-        raise GeometryError(
-            "the CAD faces' tessellation has degenerate triangles", where=source, fix="heal the model in the CAD tool"
+    if shared:
+        face = np.searchsorted(faces, face_tag)
+        kept = cad.kept(vertices, triangles, face, outer)
+        geometry.face_body = np.array([face_solids[k][0] for k in kept], np.int64)
+        pairs = sorted({face_solids[k] for k in shared})
+        features.assembly = Assembly(
+            solid_names,
+            [(g, f) for g, f, _, _ in bodies],
+            [pf for _, _, pf, _ in bodies],
+            [ce for _, _, _, ce in bodies],
+            patch_faces,
+            curve_edges,
+            [
+                Interface(
+                    f"interface-{solid_names[a]}-{solid_names[b]}",
+                    (a, b),
+                    tuple(int(faces[k]) for k in shared if face_solids[k] == (a, b)),
+                )
+                for a, b in pairs
+            ],
+            frozenset(int(faces[k]) for k in shared),
         )
-    group = _groups(surfaces, edge_faces, geometry.scale)
-    features = detect_features(
-        geometry, feature_angle, [lambda _, g=g: group[face] == g for g in range(1, group.max() + 1)]
-    )
-    patch_faces = [np.flatnonzero(group == group[face[p.faces[0]]]) for p in features.patches]
-    for patch, members in zip(features.patches, patch_faces):
-        patch.names = [face_names[k] for k in members]
-        patch.surface = surfaces[members[0]].kind
-        _face_kinds(patch, surfaces[members[0]], geometry)
-    curve_edges = _curve_edges(features, geometry, face, edge_faces, model, edges)
-    for curve, members in zip(features.curves, curve_edges):
-        curve.names = [edge_names[k] for k in members]
-    exact_patches = [surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces]
-    exact_curves = [
-        CadEntity(model, 1, tuple(edges[m].tolist()))
-        if len(m)
-        else CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
-        for curve, m in zip(features.curves, curve_edges)
-    ]
-    features.exact = (exact_patches, exact_curves)
     return geometry, features
+
+
+@dataclass
+class _CadFaces:
+    """The CAD model's faces and edges, from which the solid of a subset of faces is built."""
+
+    source: str
+    model: CadModel
+    faces: np.ndarray
+    surfaces: list
+    face_names: list
+    face_solids: list  # per face, the indices of the solids it bounds
+    edges: np.ndarray
+    feature_angle: float
+    edge_names: list = dataclasses.field(default_factory=list)
+    edge_faces: list = dataclasses.field(default_factory=list)
+
+    @staticmethod
+    def kept(vertices, triangles, face, keep) -> np.ndarray:
+        """The face index of each triangle on a ``keep`` face."""
+        return face[keep[face]]
+
+    def solid(self, vertices, triangles, face, keep, allow_multiple_solids):
+        """(Geometry, Features, CAD face tags per patch, CAD edge tags per curve) of the surface made of the
+        faces marked ``keep`` (per face)."""
+        source, model, faces, edges = self.source, self.model, self.faces, self.edges
+        triangles, face = triangles[keep[face]], face[keep[face]]
+        used = np.unique(triangles)
+        vertices, triangles = vertices[used], np.searchsorted(used, triangles)
+        geometry = validate_surface(
+            vertices, _oriented(vertices, triangles, face), source, allow_multiple_solids=allow_multiple_solids
+        )
+        if len(geometry.faces) != len(face):
+            raise GeometryError(
+                "the CAD faces' tessellation has degenerate triangles",
+                where=source,
+                fix="heal the model in the CAD tool",
+            )
+        edge_faces = [[k for k in pair if keep[k]] for pair in self.edge_faces]
+        group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids)
+        group = np.unique(group[face], return_inverse=True)[1] + 1  # per triangle, numbered among the kept faces
+        features = detect_features(
+            geometry, self.feature_angle, [lambda _, g=g: group == g for g in range(1, group.max() + 1)]
+        )
+        patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
+        for patch, members in zip(features.patches, patch_faces):
+            patch.names = [self.face_names[k] for k in members]
+            patch.surface = self.surfaces[members[0]].kind
+            _face_kinds(patch, self.surfaces[members[0]], geometry)
+        curve_edges = _curve_edges(features, geometry, face, edge_faces, model, edges)
+        for curve, members in zip(features.curves, curve_edges):
+            curve.names = [self.edge_names[k] for k in members]
+        exact_patches = [
+            self.surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces
+        ]
+        exact_curves = [
+            CadEntity(model, 1, tuple(edges[m].tolist()))
+            if len(m)
+            else CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
+            for curve, m in zip(features.curves, curve_edges)
+        ]
+        features.exact = (exact_patches, exact_curves)
+        return (
+            geometry,
+            features,
+            [tuple(faces[m].tolist()) for m in patch_faces],
+            [tuple(edges[m].tolist()) for m in curve_edges],
+        )
 
 
 def _build(path: str) -> None:
@@ -209,6 +333,13 @@ def _build(path: str) -> None:
     if len(solids) > 1:
         occ.fragment(solids, [])
     occ.synchronize()
+
+
+def _solid_name(name: str) -> str:
+    """A solid's name from the file (its STEP product or entity name, a Gmsh physical name), '' for none or for
+    the product name OpenCASCADE's STEP writer gives every solid; spaces as dashes."""
+    label = _label(name)
+    return "" if label.startswith(UNNAMED_PRODUCT) else re.sub(r"\s+", "-", label)
 
 
 def _label(name: str) -> str:
@@ -326,17 +457,15 @@ def _tessellate(gm, mesher: bool = False):
 def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> np.ndarray:
     """``triangles`` with whole CAD faces (``face``: per triangle) reversed so that neighbours walk their shared
     edges in opposite directions (Gmsh meshes each face along its own parametrisation) and every connected
-    shell encloses a positive volume."""
+    shell encloses a positive volume (so that validate_surface, which would do the same triangle by triangle,
+    has nothing to turn and warns of nothing); as they are where the surface is not closed, which
+    validate_surface refuses."""
     n = int(face.max()) + 1
     directed = triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     key = np.sort(directed, axis=1)
     order = np.lexsort((key[:, 1], key[:, 0]))
     if len(order) % 2 or (key[order[0::2]] != key[order[1::2]]).any():
-        raise GeometryError(
-            "the CAD faces' tessellation is not closed",
-            where="the CAD model",
-            fix="heal the model in the CAD tool (open shells or non-manifold edges)",
-        )
+        return triangles  # not closed: validate_surface says where
     first, second = order[0::2], order[1::2]
     a, b = np.repeat(face, 3)[first], np.repeat(face, 3)[second]
     flip_pair = directed[first, 0] == directed[second, 0]  # walked the same way: one of the two flips
@@ -359,12 +488,14 @@ def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> 
     return np.where((volume[shells[face]] < 0)[:, None], out[:, ::-1], out)
 
 
-def _groups(surfaces: list, edge_faces: list, scale: float) -> np.ndarray:
+def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list) -> np.ndarray:
     """Per CAD face, its patch group (1-based): faces joined by an edge (``edge_faces``: the face indices of
-    each edge) that lie on one cylinder, cone, sphere or torus share one."""
+    each edge) that lie on one cylinder, cone, sphere or torus and bound the same solids (``face_solids``: so
+    that a face two solids share is a patch of its own) share one."""
     pairs = np.array([pair for pair in edge_faces if len(pair) == 2], np.int64).reshape(-1, 2)
     same = [
-        surfaces[i].kind == surfaces[j].kind
+        face_solids[i] == face_solids[j]
+        and surfaces[i].kind == surfaces[j].kind
         and surfaces[i].kind in ("Cylinder", "Cone", "Sphere", "Torus")
         and np.allclose(_canonical(surfaces[i]), _canonical(surfaces[j]), atol=SAME_SURFACE * scale)
         for i, j in pairs

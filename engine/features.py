@@ -132,6 +132,8 @@ class Features:
     lengths: dict = field(default_factory=dict)  # characteristic lengths given by a shape
     exact: tuple | None = None  # (per patch, per curve) exact surfaces / curves given by the input (CAD), each
     # with .project(points); None: fitted from the facets (engine/exact.py)
+    assembly: object | None = None  # touching solids of a CAD file (engine/cad.py ``Assembly``): meshed body by
+    # body with conforming interfaces (engine/assembly.py); None for one solid or solids apart
 
     def named(self, name: str) -> list:
         """All features carrying ``name``."""

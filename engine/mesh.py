@@ -34,6 +34,8 @@ class TetMesh:
     boundary: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     boundary_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     node_bubble: np.ndarray | None = None  # (n,) the packing's bubble id of each node, -1 for added nodes
+    body: np.ndarray | None = None  # (m,) the body (0-based) of each tet where the mesher knows it (an assembly)
+    interfaces: dict = field(default_factory=dict)  # name -> (k, 3) triangles two bodies share (an assembly)
 
     def volumes(self) -> np.ndarray:
         return signed_volumes(self.points, self.tets)

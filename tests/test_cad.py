@@ -1,7 +1,8 @@
 """CAD input (issue 17): STEP files written by Gmsh's OpenCASCADE here, read back through engine/cad.py.
 
 Parts: a box with two holes, the corpus's filleted bracket and lofted handle (tests/parts/make_parts.py), the
-plate-cylinder junction, a hole whose wall is two faces, two boxes apart and two touching boxes. Checked: each
+plate-cylinder junction, a hole whose wall is two faces, two boxes apart, and two assemblies of touching solids
+(two boxes sharing a face, a cylinder standing on a plate). Checked: each
 CAD face a patch named face-N with its type, holes and fillets with the CAD's radii, the junction's concave
 circle, exact surfaces (mesh nodes and 10-node mid-nodes on the CAD faces), the volume against the CAD's, the
 pipeline's gate and files, and the STEP
@@ -18,11 +19,20 @@ import gmsh
 import numpy as np
 import pytest
 
+from engine.acceptance import boundary_topology
+from engine.assembly import mesh_assembly
+from engine.cad import load_cad
 from engine.describe import solid_features
 from engine.errors import GeometryError
+from engine.exact import on_exact_surfaces
 from engine.fe import quadratic, side_cells, tet_boundary
 from engine.job import job_from_dict
-from engine.pipeline import run
+from engine.knowledge import load_knowledge
+from engine.mesh import FACES
+from engine.meshing import get_mesher
+from engine.meshing.improve import min_dihedrals
+from engine.packing import get_packer
+from engine.pipeline import build_sizing, run
 
 _spec = importlib.util.spec_from_file_location("make_parts", Path(__file__).parent / "parts" / "make_parts.py")
 make_parts = importlib.util.module_from_spec(_spec)
@@ -50,6 +60,12 @@ def two_boxes():
     occ.addBox(40, 0, 0, 30, 30, 20)
 
 
+def cylinder_on_plate():
+    """A cylinder of radius 10 standing on a 60 x 60 x 8 plate (an assembly of two solids touching on a disc)."""
+    occ.addBox(-30, -30, 0, 60, 60, 8)
+    occ.addCylinder(5, 0, 8, 0, 0, 20, 10)
+
+
 def split_hole():
     """A 60 x 40 x 10 plate with a hole of radius 6 whose wall is two half-cylinder faces (as exporters split
     periodic faces)."""
@@ -75,6 +91,7 @@ PARTS = {
     "bracket": make_parts.bracket,
     "junction": junction,
     "two_boxes": two_boxes,
+    "cylinder_on_plate": cylinder_on_plate,
     "apart": apart,
     "split_hole": split_hole,
     "faces_only": faces_only,
@@ -178,8 +195,48 @@ def test_solids_apart_are_bodies_touching_ones_are_refused(step_files):
     assert geometry.bodies == 2
     assert geometry.volume == pytest.approx(step_files["apart"][1], rel=2e-3)
     assert [p.cylinder.radius for p in features.patches if "hole" in p.kinds] == [5.0]
-    with pytest.raises(GeometryError, match="share face-.*not supported yet"):
-        solid_features(step_files["two_boxes"][0])
+    with pytest.raises(GeometryError, match="2 of the file's 2 solids touch .*share 1 faces.*not mesh an assembly"):
+        load_cad(step_files["two_boxes"][0], allow_multiple_solids=True)
+
+
+@pytest.mark.parametrize(
+    "part, size, volumes",
+    [("two_boxes", None, [40 * 30 * 20, 30 * 30 * 20]), ("cylinder_on_plate", 1.4, [60 * 60 * 8, math.pi * 100 * 20])],
+)
+def test_touching_solids_mesh_with_a_conforming_interface(step_files, part, size, volumes):
+    """OpenCASCADE's fragment, each solid meshed with the union's sizing, the shared face triangulated once:
+    every interface triangle is a face of one tet of each body (the same nodes on both sides), the outer
+    boundary a closed two-manifold, each body's volume that of its CAD solid."""
+    path = step_files[part][0]
+    job = job_from_dict(
+        {"geometry": {"file": str(path), "allow_multiple_solids": True}, **({"size": size} if size else {})}
+    )
+    geometry, features = load_cad(path, allow_multiple_solids=True, assembly=True)
+    assert [b.volume for b, _ in features.assembly.bodies] == pytest.approx(volumes, rel=5e-3)
+    kb = load_knowledge(job.knowledge)
+    sizing = build_sizing(job, geometry, features, kb)
+    mesh, _ = mesh_assembly(get_packer("bubble"), get_mesher("delaunay"), geometry, features, sizing, knowledge=kb)
+    mesh = on_exact_surfaces(mesh, geometry, features)[0]
+    volume = mesh.volumes()
+    assert volume.min() > 0
+    assert min_dihedrals(mesh.points, mesh.tets).min() >= 10
+    for b, expected in enumerate(volumes):
+        assert volume[mesh.body == b].sum() == pytest.approx(expected, rel=5e-3)
+    topology = boundary_topology(mesh.tets)
+    assert topology["open_edges"] == topology["misoriented"] == 0
+    (name, interface), *_ = mesh.interfaces.items()
+    assert name == "interface-solid-1-solid-2" and len(mesh.interfaces) == 1 and len(interface) > 50
+    sides = []
+    for b in (0, 1):  # each body's own boundary faces on the interface: the same triangles, opposite ways round
+        tets = mesh.tets[mesh.body == b]
+        faces = tets[:, FACES].reshape(-1, 3)
+        key = np.sort(faces, axis=1)
+        found = np.isin(key.view([("", key.dtype)] * 3), np.sort(interface, axis=1).view([("", key.dtype)] * 3))
+        sides.append(np.sort(key[found.ravel()], axis=0))
+    assert len(sides[0]) == len(sides[1]) == len(interface)
+    assert np.array_equal(np.unique(sides[0], axis=0), np.unique(sides[1], axis=0))
+    on_interface = np.unique(interface)
+    assert len(np.unique(mesh.points[on_interface], axis=0)) == len(on_interface)  # no duplicate nodes
 
 
 def test_a_face_opencascade_tessellates_badly_is_meshed_by_gmsh(step_files, caplog):

@@ -36,7 +36,7 @@ from .improve import (
     relocate,
     swap_bad_faces,
 )
-from .surface import triangulate_boundary
+from .surface import check_closed, triangulate_boundary
 from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
 
 log = logging.getLogger(__name__)
@@ -47,7 +47,10 @@ REPAIR_ROUNDS = 4  # rounds of peels, collapses and swaps of what is still under
 
 
 @register_mesher("delaunay")
-def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
+def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None) -> TetMesh:
+    """``prescribed``: (triangles (k, 3) into the packing's nodes, patch (k,)) that replace the triangulation of
+    the patches they name (an interface an assembly's other body has meshed, engine/assembly.py); their nodes
+    stay where they are and their triangles stay faces of the mesh."""
     seconds = {}
     packing_in = packing
     start = time.perf_counter()
@@ -55,6 +58,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     packing = surface.nodes  # with the curve nodes added where chain edges were split
     keep = np.ones(len(packing), bool)
     keep[surface.dropped] = False
+    held = np.zeros(len(packing), bool)  # the prescribed triangles' nodes
+    if prescribed is not None:
+        surface, keep, held = _prescribe(surface, keep, prescribed)
     nodes = np.flatnonzero(keep)
     new_index = np.cumsum(keep) - 1
     points = packing.points[nodes]
@@ -79,6 +85,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     fixed = (level != VOLUME) & (level != STEINER)
     points, tets = gmsh_optimize(points, tets, fixed)
     slide = _slide_directions(points, level, entity, geometry, features)
+    held = np.concatenate([held[nodes], np.zeros(len(steiner), bool)])
+    slide[0][held] = slide[1][held] = np.nan
     surface_node = np.nan_to_num(slide[1]).any(axis=1)  # patch and smooth-cut nodes: they slide on the surface
     points, moves = relocate(points, tets, slide[0], seed)
     if (quality_below(points, tets, TARGET)).any():  # last pass: curved-patch nodes slide too
@@ -91,12 +99,17 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
     h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])  # Steiner nodes stay inside
     repair = _Repair(
-        surface_node,
-        surface_node | (level == VOLUME) | (level == STEINER),
+        surface_node & ~held,
+        (surface_node | (level == VOLUME) | (level == STEINER)) & ~held,
         _on_surface(geometry),
         SURFACE_TOLERANCE * h,
     )
-    tets, boundary, patch = repair(points, tets, boundary, surface.patch)
+    # a prescribed triangle is a patch of its own while the repairs run: no peel flips an edge between two of them
+    patch = surface.patch.copy()
+    own = np.flatnonzero(held[boundary].all(axis=1) & np.isin(patch, prescribed[1] if prescribed else []))
+    own_patch = patch[own]
+    patch[own] = len(features.patches) + np.arange(len(own))
+    tets, boundary, patch = repair(points, tets, boundary, patch)
     if quality_below(points, tets, FLOOR).any():
         # relocation and the repairs change the tets Gmsh's swaps saw: they may now take what is left
         points, tets = gmsh_optimize(points, tets, fixed)
@@ -106,6 +119,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     peeled, collapsed = repair.peeled, repair.collapsed
     seconds["improve"] = time.perf_counter() - start
 
+    if len(own):
+        alone = patch >= len(features.patches)
+        patch[alone] = own_patch[patch[alone] - len(features.patches)]
     points, tets, level, entity, bubble, renumber = compact(points, tets, level, entity, bubble)
     boundary = renumber[boundary]
     stats = {
@@ -138,6 +154,30 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     )
     order = np.argsort(patch, kind="stable")
     return TetMesh(points, tets, level, entity, stats, boundary[order], patch[order], bubble)
+
+
+def _prescribe(surface, keep, prescribed):
+    """The surface triangulation with the patches of the ``prescribed`` (triangles, patch) replaced by them; the
+    nodes to keep (the packing's nodes on those patches that no prescribed triangle uses left out); which nodes
+    are held (the prescribed triangles'). A curve node the triangulation added on a prescribed triangle's edge
+    (a split chain edge) would leave the surface open there: refused."""
+    triangles, patch = (np.asarray(a, np.int64) for a in prescribed)
+    nodes = surface.nodes
+    held = np.zeros(len(nodes), bool)
+    held[triangles.ravel()] = True
+    on_patch = (nodes.level == PATCH) & np.isin(nodes.entity, patch)
+    keep = keep & ~(on_patch & ~held)
+    keep[held] = True
+    mine = np.isin(surface.patch, patch)
+    replaced = np.vstack([surface.triangles[~mine], triangles])
+    try:
+        check_closed(replaced)
+    except RuntimeError as error:
+        raise RuntimeError(f"the prescribed interface does not fit the rest of the surface ({error})") from None
+    surface = type(surface)(
+        replaced, np.concatenate([surface.patch[~mine], patch]), np.setdiff1d(surface.dropped, triangles), nodes
+    )
+    return surface, keep, held
 
 
 def _slide_directions(points, level, entity, geometry, features):
