@@ -56,7 +56,7 @@ TARGET = 20.0 / REGULAR_DIHEDRAL  # relocation works on tets with q below: min d
 FLOOR = min(10.0 / REGULAR_DIHEDRAL, 0.15)  # the quality every element must reach
 RELOCATION_PASSES = 6
 RING = 7  # the largest ring of tets around an edge that is retriangulated (42 ways)
-PEEL_ROUNDS = 8  # rounds of each repair: one can lay the next bad tet open
+PEEL_ROUNDS = 8  # rounds of each repair (peels, collapses, swaps): one can lay the next bad tet open
 CANDIDATES = 24  # perturbation directions per node and pass
 STEPS = np.array([0.04, 0.12, 0.25])  # perturbation lengths, x the mean edge length of the star
 
@@ -162,15 +162,24 @@ def peel_boundary_slivers(points, tets, boundary, patch, quality: float, removab
     their nodes. Returns (tets, boundary, patch, removed count); the number of bad tets is
     small, so they are taken one by one, the worst first.
     """
-    removed = 0
-    for _ in range(PEEL_ROUNDS):
-        tets, boundary, patch, count = _peel_round(
+    return _in_rounds(
+        lambda tets, boundary, patch: _peel_round(
             points, tets, boundary, patch, quality, removable, surface, tolerance
-        )
-        removed += count
+        ),
+        (tets, boundary, patch),
+    )
+
+
+def _in_rounds(step, state: tuple, rounds: int = PEEL_ROUNDS) -> tuple:
+    """The round loop of the repairs: ``step(*state)`` returns the new state and a count of changes, with the
+    count last; rounds run until one changes nothing, at most ``rounds``. Returns (*state, total count)."""
+    total = 0
+    for _ in range(rounds):
+        *state, count = step(*state)
+        total += count
         if not count:
             break
-    return tets, boundary, patch, removed
+    return (*state, total)
 
 
 def _peel_round(points, tets, boundary, patch, quality, removable, surface, tolerance):
@@ -282,15 +291,12 @@ def collapse_bad_nodes(points, tets, boundary, patch, quality: float, collapsibl
     for the merged node's boundary faces, every boundary edge keeps two faces, and (with ``surface``, see
     ``peel_boundary_slivers``) the moved boundary faces stay as close to the input surface. The node is
     left unused (``tetra.compact`` drops it). In rounds; returns (tets, boundary, patch, collapsed count)."""
-    total = 0
-    for _ in range(PEEL_ROUNDS):
-        tets, boundary, patch, count = _collapse_round(
+    return _in_rounds(
+        lambda tets, boundary, patch: _collapse_round(
             points, tets, boundary, patch, quality, collapsible, surface, tolerance
-        )
-        total += count
-        if not count:
-            break
-    return tets, boundary, patch, total
+        ),
+        (tets, boundary, patch),
+    )
 
 
 def _collapse_round(points, tets, boundary, patch, quality, collapsible, surface, tolerance):
@@ -432,13 +438,7 @@ def swap_bad_faces(points, tets, quality: float):
     into 2k - 4 (k <= RING, every triangulation of the ring tried); the best is kept where every new tet is
     positive and the worst of them is better than the worst of the tets they replace. A flat tet of four
     surface nodes so gets a volume node as its fourth. In rounds; returns (tets, flips)."""
-    total = 0
-    for _ in range(PEEL_ROUNDS):
-        tets, count = _swap_round(points, tets, quality)
-        total += count
-        if not count:
-            break
-    return tets, total
+    return _in_rounds(lambda tets: _swap_round(points, tets, quality), (tets,))
 
 
 def _swap_round(points, tets, quality):
