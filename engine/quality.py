@@ -1,9 +1,8 @@
-"""Tetrahedron quality metrics, for every element in one numba pass.
+"""Tetrahedron quality metrics, for every element in one numba pass, and the boundary's and the sizes' reports.
 
-Conventions (../shared/reference/NOTES.md): radius ratio rho = 3 r_in / R_circ (1 for the regular
-tetrahedron), mean ratio eta = 12 (3|V|)^(2/3) / sum of squared edge lengths, dihedral angles in
-degrees (70.53 for the regular tetrahedron), aspect ratio = longest edge / (2 sqrt(6) r_in) (1 for
-the regular tetrahedron). Volumes are signed: positive for positively oriented tetrahedra.
+The per-tet metrics are those of engine/tetmetrics.py (its conventions), the kernel the optimiser
+(engine/meshing/improve.py) aims with too: radius ratio, mean ratio, min and max dihedral (degrees), aspect
+ratio and signed volume.
 """
 
 from __future__ import annotations
@@ -13,11 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._numba import numba
-from .mesh import FACES  # face k is opposite vertex k
+from .tetmetrics import all_metrics
 
 EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-# the two faces meeting at edge e are the faces opposite the edge's two other vertices
-OPPOSITE = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]])
 
 
 @dataclass
@@ -64,18 +61,12 @@ class TetQuality:
 
 def tet_quality(points: np.ndarray, tets: np.ndarray) -> TetQuality:
     """All metrics for every tetrahedron."""
-    out = _metrics(
-        np.ascontiguousarray(points, dtype=np.float64),
-        np.ascontiguousarray(tets, dtype=np.int64),
-        FACES,
-        EDGES,
-        OPPOSITE,
-    )
+    out = _metrics(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets, dtype=np.int64))
     return TetQuality(*out)
 
 
 @numba.njit(parallel=True, cache=True)
-def _metrics(points, tets, faces, edges, opposite):
+def _metrics(points, tets):
     m = tets.shape[0]
     volume = np.empty(m)
     radius_ratio = np.empty(m)
@@ -84,64 +75,14 @@ def _metrics(points, tets, faces, edges, opposite):
     max_dihedral = np.empty(m)
     aspect = np.empty(m)
     for t in numba.prange(m):
-        p = np.empty((4, 3))
-        for v in range(4):
-            for k in range(3):
-                p[v, k] = points[tets[t, v], k]
-        ab = p[1] - p[0]
-        ac = p[2] - p[0]
-        ad = p[3] - p[0]
-        vol = (
-            ab[0] * (ac[1] * ad[2] - ac[2] * ad[1])
-            - ab[1] * (ac[0] * ad[2] - ac[2] * ad[0])
-            + ab[2] * (ac[0] * ad[1] - ac[1] * ad[0])
-        ) / 6.0
-        volume[t] = vol
-        absvol = abs(vol)
-        normals = np.empty((4, 3))
-        area_sum = 0.0
-        for f in range(4):
-            u = p[faces[f, 1]] - p[faces[f, 0]]
-            w = p[faces[f, 2]] - p[faces[f, 0]]
-            nx = u[1] * w[2] - u[2] * w[1]
-            ny = u[2] * w[0] - u[0] * w[2]
-            nz = u[0] * w[1] - u[1] * w[0]
-            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
-            area_sum += 0.5 * norm
-            scale = 1.0 / norm if norm > 0 else 0.0
-            normals[f, 0] = nx * scale
-            normals[f, 1] = ny * scale
-            normals[f, 2] = nz * scale
-        lengths = np.empty(6)
-        sq_sum = 0.0
-        longest = 0.0
-        for e in range(6):
-            d = p[edges[e, 1]] - p[edges[e, 0]]
-            sq = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-            lengths[e] = np.sqrt(sq)
-            sq_sum += sq
-            longest = max(longest, lengths[e])
-        inradius = 3.0 * absvol / area_sum if area_sum > 0 else 0.0
-        # circumradius from the products of opposite edge lengths (edges e and 5 - e are opposite)
-        x = lengths[0] * lengths[5]
-        y = lengths[1] * lengths[4]
-        z = lengths[2] * lengths[3]
-        product = (x + y + z) * (x + y - z) * (x - y + z) * (-x + y + z)
-        circum = np.sqrt(max(product, 0.0)) / (24.0 * absvol) if absvol > 0 else np.inf
-        radius_ratio[t] = min(max(3.0 * inradius / circum, 0.0), 1.0) if circum > 0 else 0.0
-        mean_ratio[t] = min(12.0 * (3.0 * absvol) ** (2.0 / 3.0) / sq_sum, 1.0) if sq_sum > 0 else 0.0
-        lo = 180.0
-        hi = 0.0
-        for e in range(6):
-            a = normals[opposite[e, 0]]
-            b = normals[opposite[e, 1]]
-            c = -(a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
-            angle = np.degrees(np.arccos(min(max(c, -1.0), 1.0)))
-            lo = min(lo, angle)
-            hi = max(hi, angle)
-        min_dihedral[t] = lo
-        max_dihedral[t] = hi
-        aspect[t] = longest / (2.0 * np.sqrt(6.0) * inradius) if inradius > 0 else np.inf
+        (
+            volume[t],
+            radius_ratio[t],
+            mean_ratio[t],
+            min_dihedral[t],
+            max_dihedral[t],
+            aspect[t],
+        ) = all_metrics(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
     return volume, radius_ratio, mean_ratio, min_dihedral, max_dihedral, aspect
 
 

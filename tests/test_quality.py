@@ -1,5 +1,6 @@
 """Tetrahedron quality metrics on tetrahedra whose values are known."""
 
+import itertools
 import math
 import time
 
@@ -60,3 +61,31 @@ def test_million_tetrahedra_speed_figure():
     q = tet_quality(points, tets)
     print(f"quality of 1,000,000 tetrahedra: {time.perf_counter() - start:.2f} s")
     assert np.isfinite(q.min_dihedral).all()
+
+
+def test_a_tet_with_a_repeated_node_is_flat():
+    """Its volume is rounding only: radius ratio 0 whatever the rounding, not the ratio of two rounding errors."""
+    points = np.random.default_rng(1).random((3, 3))
+    rows = np.array([r for r in itertools.product(range(3), repeat=4) if len(set(r)) == 3])
+    q = tet_quality(points, rows)
+    assert (q.volume != 0).any()  # the rounding this is about
+    assert (q.radius_ratio == 0).all() and (q.mean_ratio < 1e-9).all() and (q.aspect_ratio > 1e9).all()
+
+
+def test_the_optimiser_aims_at_what_the_report_measures():
+    """One kernel (engine/tetmetrics.py): the optimiser's min dihedral and q = min(radius ratio, min dihedral /
+    70.53 deg) are the report's, bit for bit; -1 for the optimiser where the tet is not positive."""
+    from engine.meshing.improve import REGULAR_DIHEDRAL, min_dihedrals, quality_below
+
+    rng = np.random.default_rng(2)
+    points = rng.random((300, 3))
+    tets = rng.integers(0, len(points), size=(20_000, 4))
+    tets = tets[np.array([len(set(r)) == 4 for r in tets.tolist()])]
+    q = tet_quality(points, tets)
+    positive = q.volume > 0
+    assert 0.4 < positive.mean() < 0.6
+    optimiser = min_dihedrals(points, tets)
+    assert np.array_equal(optimiser[positive], q.min_dihedral[positive]) and (optimiser[~positive] == -1).all()
+    aim = np.where(positive, np.minimum(q.radius_ratio, q.min_dihedral / REGULAR_DIHEDRAL), -1.0)
+    for threshold in (0.05, 10 / REGULAR_DIHEDRAL, 0.2, 20 / REGULAR_DIHEDRAL, 0.5):
+        assert np.array_equal(quality_below(points, tets, threshold), aim < threshold)

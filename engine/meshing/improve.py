@@ -8,7 +8,8 @@
    tetrahedron to the best of a few candidate places (star centroid,
    deterministic perturbations), judged by the worst element quality of the
    node's star, q = min(radius ratio, min dihedral / 70.53 deg) (1 for the
-   regular tetrahedron); a move is kept only if it improves it. Volume nodes
+   regular tetrahedron; ``engine/tetmetrics.py``, the kernel the quality
+   report measures with); a move is kept only if it improves it. Volume nodes
    move freely, nodes of planar patches slide in their plane, curve and corner
    nodes stay. Nodes of curved patches stay too, but for a last pass on what
    is still under the target, where they slide in the plane of their input
@@ -47,11 +48,11 @@ import numpy as np
 
 from .._numba import numba
 from ..mesh import FACES
+from ..tetmetrics import REGULAR_DIHEDRAL, min_dihedral, shape_quality
 from ..topology import node_stars
 from .tetra import gmsh_session
 
 GMSH_THRESHOLD = 0.5  # Gmsh optimises tets with gamma below this
-REGULAR_DIHEDRAL = 70.528779365509308
 TARGET = 20.0 / REGULAR_DIHEDRAL  # relocation works on tets with q below: min dihedral < 20 deg or radius ratio < 0.284
 FLOOR = min(10.0 / REGULAR_DIHEDRAL, 0.15)  # the quality every element must reach
 RELOCATION_PASSES = 6
@@ -568,7 +569,7 @@ def min_dihedrals(points, tets) -> np.ndarray:
 def _min_dihedrals(points, tets):
     out = np.empty(len(tets))
     for t in numba.prange(len(tets)):
-        out[t] = _min_dihedral(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
+        out[t] = min_dihedral(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
     return out
 
 
@@ -580,82 +581,18 @@ def _qualities(points, tets) -> np.ndarray:
 def _quality_values(points, tets):
     out = np.empty(len(tets))
     for t in range(len(tets)):
-        out[t] = _quality(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
+        out[t] = shape_quality(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]])
     return out
 
 
 @numba.njit(parallel=True, cache=True, error_model="numpy")
 def _below_quality(points, tets, rows, quality):
-    """Which of the tets ``rows`` have _quality below ``quality``."""
+    """Which of the tets ``rows`` have shape_quality below ``quality``."""
     out = np.empty(len(rows), dtype=np.bool_)
     for i in numba.prange(len(rows)):
         t = rows[i]
-        out[i] = _quality(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]) < quality
+        out[i] = shape_quality(points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]) < quality
     return out
-
-
-@numba.njit(inline="always", error_model="numpy")
-def _cross(ax, ay, az, bx, by, bz):
-    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _shape(a, b, c, d):
-    """(6 x volume, the largest cosine between outward face normals' opposites, radius ratio)."""
-    ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
-    vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
-    wx, wy, wz = d[0] - a[0], d[1] - a[1], d[2] - a[2]
-    vw = _cross(vx, vy, vz, wx, wy, wz)
-    six_volume = ux * vw[0] + uy * vw[1] + uz * vw[2]
-    if six_volume <= 0.0:
-        return six_volume, 1.0, 0.0
-    # outward normals (area x 2) of the faces opposite a, b, c, d
-    n0 = _cross(d[0] - b[0], d[1] - b[1], d[2] - b[2], c[0] - b[0], c[1] - b[1], c[2] - b[2])
-    n1 = vw
-    n2 = _cross(wx, wy, wz, ux, uy, uz)
-    n3 = _cross(ux, uy, uz, vx, vy, vz)
-    normals = (n0, n1, n2, n3)
-    lengths = (
-        np.sqrt(n0[0] ** 2 + n0[1] ** 2 + n0[2] ** 2),
-        np.sqrt(n1[0] ** 2 + n1[1] ** 2 + n1[2] ** 2),
-        np.sqrt(n2[0] ** 2 + n2[1] ** 2 + n2[2] ** 2),
-        np.sqrt(n3[0] ** 2 + n3[1] ** 2 + n3[2] ** 2),
-    )
-    largest = -1.0
-    for i in range(4):
-        for j in range(i + 1, 4):
-            cosine = -(
-                normals[i][0] * normals[j][0] + normals[i][1] * normals[j][1] + normals[i][2] * normals[j][2]
-            ) / (lengths[i] * lengths[j])
-            largest = max(largest, cosine)
-    area2 = lengths[0] + lengths[1] + lengths[2] + lengths[3]  # twice the surface area
-    r_in = six_volume / area2
-    uu, vv, ww = ux * ux + uy * uy + uz * uz, vx * vx + vy * vy + vz * vz, wx * wx + wy * wy + wz * wz
-    wu = _cross(wx, wy, wz, ux, uy, uz)
-    uv = n3
-    cx = uu * vw[0] + vv * wu[0] + ww * uv[0]
-    cy = uu * vw[1] + vv * wu[1] + ww * uv[1]
-    cz = uu * vw[2] + vv * wu[2] + ww * uv[2]
-    r_circ = np.sqrt(cx * cx + cy * cy + cz * cz) / (2 * six_volume)
-    return six_volume, largest, 3 * r_in / r_circ
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _min_dihedral(a, b, c, d):
-    """Minimum dihedral angle in degrees, -1 when the tet is inverted or flat."""
-    six_volume, largest, _ = _shape(a, b, c, d)
-    if six_volume <= 0.0:
-        return -1.0
-    return np.degrees(np.arccos(min(1.0, largest)))
-
-
-@numba.njit(cache=True, error_model="numpy")
-def _quality(a, b, c, d):
-    """min(radius ratio, min dihedral / regular dihedral): 1 for the regular tet, -1 for an inverted one."""
-    six_volume, largest, radius_ratio = _shape(a, b, c, d)
-    if six_volume <= 0.0:
-        return -1.0
-    return min(radius_ratio, np.degrees(np.arccos(min(1.0, largest))) / REGULAR_DIHEDRAL)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -666,7 +603,7 @@ def _star_quality(points, tets, star, node, position):
         for k in range(4):
             v = tets[t, k]
             q[k] = position if v == node else points[v]
-        worst = min(worst, _quality(q[0], q[1], q[2], q[3]))
+        worst = min(worst, shape_quality(q[0], q[1], q[2], q[3]))
     return worst
 
 
