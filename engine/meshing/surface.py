@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import igl
+import igl.triangle
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
@@ -30,6 +31,7 @@ SEAM_TRIES = 4  # seams tried on a full cylinder, each SEAM_SHIFT of a turn on f
 SEAM_SHIFT = 0.381966
 CROWDING = 0.25  # a patch node nearer than this x h to its patch's border is left out, ...
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
+CONSTRAINED_AFTER = 3  # ... after which a patch that still misses some is triangulated with them constrained
 HOLE = 1.0  # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
@@ -102,6 +104,11 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
     A chain edge that a patch's Delaunay triangulation misses (other border
     nodes inside its diametral circle, at an acute corner of the patch) is
     split at its curve's midpoint, on both of its patches, until none is missed.
+    Two chains that meet at a small angle encroach on each other whatever the
+    splits (each midpoint lies in the other chain's circles, and the missed
+    edges double each round): after CONSTRAINED_AFTER rounds a patch that
+    still misses edges gets a constrained Delaunay triangulation instead
+    (Shewchuk's Triangle through libigl), which keeps every chain edge.
     Holes in the packing of a patch get a node each (see ``_holes``).
     """
     sides = curve_sides(geometry, features)
@@ -112,7 +119,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
         if len(coarse) == 0:
             break
         nodes = _split_chain_edges(nodes, features, chains, coarse)
-    for _ in range(SPLIT_ROUNDS):
+    for round in range(SPLIT_ROUNDS):
         chains = curve_chains(nodes, features)
         triangles, patch_of, dropped, missed, added = [], [], [], [], []
         next_node = len(nodes)
@@ -129,6 +136,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
                 nodes.radius[members],
                 np.searchsorted(members, edges),
                 nodes.level[members] == PATCH,
+                constrained=round >= CONSTRAINED_AFTER,
             )
             index = np.concatenate([members, next_node + np.arange(len(new_points))])
             next_node += len(new_points)
@@ -240,12 +248,13 @@ def _split_chain_edges(nodes, features, chains, pairs):
     return Packing.concatenate([nodes, added], nodes.stats)
 
 
-def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
+def _triangulate_patch(patch, geometry, points, radius, constraints, droppable, constrained=False):
     """One patch's surface triangulation, refined where the packing left a hole.
 
     Returns (triangles over the nodes then the added points, counter-clockwise
     seen from outside; ``droppable`` nodes left out for crowding the border;
-    constrained edges the triangulation misses; added points (k, 3) and their radii).
+    constrained edges the triangulation misses; added points (k, 3) and their radii). ``constrained``: a
+    Delaunay triangulation that misses constrained edges is replaced by a constrained one.
     """
     chart = PatchChart(patch, geometry)
     uv = chart.uv(points)
@@ -253,7 +262,7 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
     for round in range(REFINE_ROUNDS + 1):
         all_uv, all_radius = np.vstack([uv, added_uv]), np.concatenate([radius, added_radius])
         all_droppable = np.concatenate([droppable, np.ones(len(added_uv), bool)])
-        tri, crowded, lost = _triangulate_chart(chart, all_uv, all_radius, constraints, all_droppable)
+        tri, crowded, lost = _triangulate_chart(chart, all_uv, all_radius, constraints, all_droppable, constrained)
         if len(lost) or round == REFINE_ROUNDS:
             break
         new_uv, new_radius = _holes(chart, all_uv, all_radius, tri, constraints, crowded)
@@ -266,18 +275,18 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable):
     return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv[kept_added]), added_radius[kept_added])
 
 
-def _triangulate_chart(chart, uv, radius, constraints, droppable):
+def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained):
     """(triangles, crowded nodes, lost constrained edges) of one chart. A periodic strip whose two copies
     of the seam band triangulate a nearly co-circular set differently (roundoff decides) leaves triangles
     that pair with no neighbour: then the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
     if chart.turn is None:
-        return _triangulate_strip(chart, uv, radius, constraints, droppable)
+        return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained)
     for attempt in range(SEAM_TRIES):
         turned = uv.copy()
         turned[:, 0] = (
             np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
         )
-        tri, crowded, lost = _triangulate_strip(chart, turned, radius, constraints, droppable)
+        tri, crowded, lost = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained)
         if len(lost) or _paired(tri, constraints):
             break
     return tri, crowded, lost
@@ -292,7 +301,7 @@ def _paired(tri, constraints) -> bool:
     return bool(np.isin(key[lone], constraints[:, 0] * n + constraints[:, 1]).all())
 
 
-def _triangulate_strip(chart, uv, radius, constraints, droppable):
+def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained):
     original = np.arange(len(uv))
     copies = chart.copies(uv, radius)
     extended = np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])
@@ -305,6 +314,9 @@ def _triangulate_strip(chart, uv, radius, constraints, droppable):
         extended, original = extended[rows], original[rows]
     tri = _delaunay(extended)
     inside, lost = _inside_regions(tri, edges)
+    if len(lost) and constrained:
+        tri = _constrained_delaunay(extended, edges)
+        inside, lost = _inside_regions(tri, edges)
     if chart.turn is not None:  # one copy of each triangle: the one whose centroid lies in the unrolled turn
         u = extended[tri, 0].mean(axis=1)
         inside &= (u >= -chart.turn / 2) & (u < chart.turn / 2)
@@ -470,11 +482,23 @@ class PatchChart:
             c = self.cylinder
             theta = np.angle(np.exp(1j * (self._angle(points) - self.middle - np.pi)))
             return np.column_stack([self.sign * c.radius * theta, (points - c.point) @ c.axis])
-        _, face, closest = self.tree.squared_distance(
-            self.vertices, self.faces, np.ascontiguousarray(points, dtype=np.float64)
-        )
+        # the nearest triangle's map, extended over its plane: a smoothed cut's node just off the patch (the cut
+        # crosses facets) is mapped beyond the border rather than onto its nearest border point, where nodes of
+        # one chain (or of two cuts meeting at a small angle) would share uv
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        _, face, closest = self.tree.squared_distance(self.vertices, self.faces, points)
         corners = self.vertices[self.faces[face]]
-        weights = igl.barycentric_coordinates(closest, *(np.ascontiguousarray(corners[:, i]) for i in range(3)))
+        e1, e2, rel = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], points - corners[:, 0]
+        g11, g12, g22, r1, r2 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2), _dot(rel, e1), _dot(rel, e2)
+        det = g11 * g22 - g12 * g12
+        flat = det <= 1e-12 * np.maximum(g11 * g22, 1e-300)  # a needle or a point: the nearest point's weights
+        det = np.where(flat, 1.0, det)
+        b, c = (g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det
+        weights = np.column_stack([1 - b - c, b, c])
+        if flat.any():
+            weights[flat] = igl.barycentric_coordinates(
+                closest[flat], *(np.ascontiguousarray(corners[flat, i]) for i in range(3))
+            )
         return np.einsum("ij,ijk->ik", weights, self.vertex_uv[self.faces[face]])
 
     def lift(self, uv: np.ndarray) -> np.ndarray:
@@ -532,6 +556,10 @@ class PatchChart:
         return uv
 
 
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
 def _cross2(a, b):
     return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
 
@@ -558,6 +586,20 @@ def _constraint_copies(edges, original, extended) -> np.ndarray:
     length = np.linalg.norm(extended[out[:, 0]] - extended[out[:, 1]], axis=1)
     half_turn = (extended[:, 0].max() - extended[:, 0].min()) / 4
     return out[length < half_turn]
+
+
+def _constrained_delaunay(uv, edges) -> np.ndarray:
+    """Constrained Delaunay triangles (counter-clockwise) of ``uv`` with ``edges`` (k, 2) as edges, over the
+    nodes' convex hull, by Triangle (libigl); Qhull's :func:`_delaunay` when constrained edges cross (Triangle
+    would add their crossings as nodes)."""
+    points, tri = igl.triangle.triangulate(
+        np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(edges, dtype=np.int64), flags="pcQ"
+    )[:2]
+    if len(points) != len(uv):
+        return _delaunay(uv)
+    flip = _signed_areas(uv, tri) < 0
+    tri[flip] = tri[flip][:, [0, 2, 1]]
+    return tri
 
 
 def _delaunay(uv) -> np.ndarray:
