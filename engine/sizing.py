@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -376,6 +376,8 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
     placed = []
     for placement in placements:
         pattern = check_placement(kb, placement)
+        if pattern.anchor == "curvature":
+            placement = _within_volume_budget(pattern, placement, features, geometry, global_size)
         anchors = _anchors(pattern, placement, features, geometry)
         local = pattern.anchor in LOCAL_SCALES
         if not anchors and not local:
@@ -400,6 +402,35 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
             if one.zones or not local:  # a class of walls (gaps) whose zones are all off sizes nothing
                 placed.append(one)
     return placed
+
+
+def _within_volume_budget(pattern, placement, features, geometry, global_size):
+    """The curvature placement with 'per_circle' raised until the chords' predicted volume change is within
+    its 'volume_change' share of the solid's volume (0: as placed); see patterns/curvature.yaml."""
+    params = {name: p.default for name, p in pattern.parameters.items()} | placement.parameters
+    budget = float(params.get("volume_change", 0.0))
+    if budget <= 0:
+        return placement
+    per_circle, before, after = curvature(geometry, features.feature_angle).per_circle_for_volume(
+        float(geometry.mesh.volume),
+        budget,
+        float(params["per_circle"]),
+        float(params["finest"]) * global_size,
+        global_size,
+    )
+    if per_circle <= float(params["per_circle"]):
+        return placement
+    log.info(
+        "%s: %g elements per circle would change the volume by %+.2f %% (straight chords on curved faces); "
+        "%g keeps it to %+.2f %% (volume_change %g %%)",
+        placement.id,
+        params["per_circle"],
+        100 * before,
+        per_circle,
+        100 * after,
+        100 * budget,
+    )
+    return replace(placement, parameters={**placement.parameters, "per_circle": per_circle})
 
 
 def _anchors(pattern, placement, features, geometry):
