@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .acceptance import Tolerances
-from .errors import FuzzymeshError, KnowledgeError
-from .expr import Expression, ExpressionError
-from .fcl import load_fcl
-from .fuzzy import Rule, RuleBase, Term, Variable
-from .regions import RegionDistance
-from .schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, finite, in_range, positive, validate
-from .yamlfile import Located, load_yaml
+from ..acceptance import Tolerances
+from ..errors import FuzzymeshError, KnowledgeError
+from ..expr import Expression, ExpressionError
+from ..fcl import load_fcl
+from ..fuzzy import Rule, RuleBase, Term, Variable
+from ..regions import RegionDistance
+from ..schema import BOOLEAN, INTEGER, LIST, MAPPING, NUMBER, STRING, Field, finite, in_range, positive, validate
+from ..yamlfile import Located, load_yaml
 
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
 KNOWLEDGE_SUFFIXES = (".yaml", ".yml", ".fcl")  # .fcl: rule files in FCL (engine/fcl.py)
@@ -1052,7 +1052,7 @@ def check_placement(kb: KnowledgeBase, placement: Placement) -> Pattern:
 
 def default_paths() -> list[Path]:
     """The shipped knowledge/ and patterns/ folders (installed wheel or source checkout)."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # engine/
     installed = here / "_data"
     root = installed if installed.is_dir() else here.parent
     return [root / "knowledge", root / "patterns"]
