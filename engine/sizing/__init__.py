@@ -22,14 +22,14 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from ._numba import numba
-from .anchors import DomainDistance, SampledDistance, curve_distance, patch_distance
-from .curvature import curvature
-from .errors import KnowledgeError, LimitError
-from .fuzzy import Term
-from .knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values
-from .regions import RegionDistance
-from .thickness import local_size
+from .._numba import numba
+from ..anchors import DomainDistance, SampledDistance, curve_distance, patch_distance
+from ..curvature import curvature
+from ..errors import KnowledgeError, LimitError
+from ..fuzzy import Term
+from ..knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values
+from ..regions import RegionDistance
+from ..thickness import local_size
 
 log = logging.getLogger(__name__)
 
