@@ -6,11 +6,14 @@ Run after meshing, the same for every packer and mesher (built-in or plug-in). T
 2. the tets' own boundary faces form a closed two-manifold (every edge in exactly two faces, with
    opposite orientations); the mesher's declared boundary triangles only name patches
    (:func:`engine.fe.tet_boundary`);
-3. the mesh volume is within ``volume`` (a fraction) of the input solid's;
-4. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
+3. an assembly's (touching solids of a CAD file, engine/assembly.py): every interface triangle is a face of
+   exactly two tets, of different bodies (the interface conforms, its nodes are merged);
+4. the mesh volume is within ``volume`` (a fraction) of the input solid's, and each body of an assembly
+   within it of its CAD solid's;
+5. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
    size h at each sample point, is at most ``hausdorff`` in both directions;
-5. the smallest dihedral angle is at least ``min_dihedral`` degrees;
-6. for 10-node elements, the smallest scaled Jacobian is at least ``quadratic_jacobian``.
+6. the smallest dihedral angle is at least ``min_dihedral`` degrees;
+7. for 10-node elements, the smallest scaled Jacobian is at least ``quadratic_jacobian``.
 
 The tolerances are expert knowledge: ``acceptance:`` in the sizing defaults (knowledge/sizing.yaml), which a
 job's own knowledge files may replace. A failed check raises :class:`~engine.errors.MeshRejected`: one line
@@ -99,6 +102,21 @@ def check_mesh(
             check="closed two-manifold boundary",
             fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}",
         )
+    assembly = getattr(features, "assembly", None) if mesh.body is not None else None
+    if assembly is not None and mesh.interfaces:
+        triangles = np.concatenate([np.asarray(t, np.int64).reshape(-1, 3) for t in mesh.interfaces.values()])
+        names = np.repeat(list(mesh.interfaces), [len(t) for t in mesh.interfaces.values()])
+        count, different = interface_sides(tets, mesh.body, triangles)
+        bad = np.flatnonzero((count != 2) | ~different)
+        if len(bad):
+            first = bad[0]
+            how = f"a face of {count[first]} tets" if count[first] != 2 else "a face of two tets of the same body"
+            raise MeshRejected(
+                f"{len(bad)} of the {len(triangles)} interface triangles are not shared by two tets of different "
+                f"bodies, the first on {names[first]} ({how}) at {where(mesh.points[triangles[first]].mean(axis=0))}",
+                check="assembly interface",
+                fix=f"mesh again with another seed and report the input; {KEEP_INVALID}",
+            )
     error = mesh.volume / geometry.volume - 1
     if not abs(error) <= tolerances.volume:
         worst = boundary["hausdorff_mesh_to_input"] if error > 0 else boundary["hausdorff_input_to_mesh"]
@@ -109,6 +127,20 @@ def check_mesh(
             fix="refine there (a smaller size, or a pattern placed on that feature) "
             f"or raise acceptance.volume in the sizing defaults; {KEEP_INVALID}",
         )
+    if assembly is not None:
+        body_volume = np.bincount(mesh.body, quality.volume, minlength=len(assembly.bodies))
+        cad_volume = assembly.volumes or [g.volume for g, _ in assembly.bodies]
+        for b, (name, cad) in enumerate(zip(assembly.names, cad_volume)):
+            error = body_volume[b] / cad - 1
+            if not abs(error) <= tolerances.volume:
+                centre = mesh.points[tets[mesh.body == b]].mean(axis=(0, 1))
+                raise MeshRejected(
+                    f"the body '{name}' has {100 * error:+.2f} % of its CAD solid's volume (tolerance "
+                    f"{100 * tolerances.volume:g} %); its tets' centre is at {where(centre)}",
+                    check="body volume",
+                    fix="refine that body (a smaller size, or a pattern placed on its features) or raise "
+                    f"acceptance.volume in the sizing defaults; {KEEP_INVALID}",
+                )
     for direction, text in (
         ("hausdorff_input_to_mesh", "the input surface is"),
         ("hausdorff_mesh_to_input", "the mesh boundary is"),
@@ -143,6 +175,32 @@ def check_mesh(
                 fix="refine the curved surface there (more elements per circle) or lower "
                 f"acceptance.quadratic_jacobian in the sizing defaults; {KEEP_INVALID}",
             )
+
+
+def interface_sides(tets: np.ndarray, body: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``triangles`` (k, 3): how many of ``tets`` have it as a face, and whether those tets' bodies
+    (``body``: per tet) differ."""
+    from .mesh import FACES
+
+    if len(triangles) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, bool)
+    on = np.zeros(int(max(tets.max(), triangles.max())) + 1, bool)
+    on[triangles.ravel()] = True
+    near = np.flatnonzero(on[tets].sum(axis=1) >= 3)  # tets with a face on the interface's nodes
+    faces = tets[near][:, FACES].reshape(-1, 3)
+    owner = np.repeat(near, 4)
+    inside = on[faces].all(axis=1)
+    faces, owner = faces[inside], owner[inside]
+    keys = np.sort(np.vstack([faces, triangles]), axis=1)
+    _, inverse = np.unique(keys, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    face_key, triangle_key = inverse[: len(faces)], inverse[len(faces) :]
+    size = int(inverse.max()) + 1
+    count = np.bincount(face_key, minlength=size)
+    low, high = np.full(size, np.iinfo(np.int64).max), np.full(size, -1)
+    np.minimum.at(low, face_key, body[owner])
+    np.maximum.at(high, face_key, body[owner])
+    return count[triangle_key], (high > low)[triangle_key]
 
 
 def _locate(point: np.ndarray, geometry, features) -> str:

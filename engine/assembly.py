@@ -140,9 +140,10 @@ class _Merged:
         stats = {
             "bodies": len(self.stats),
             "interface_triangles": int(sum(len(t) for t in interfaces.values())),
+            "boundary_triangles": int(outer.sum()),  # the outer ones (each body's include its interfaces)
             **{
                 key: sum(s.get(key, 0) for s in self.stats)
-                for key in ("boundary_triangles", "steiner_points", "relocated_nodes", "nodes_collapsed")
+                for key in ("steiner_points", "relocated_nodes", "nodes_collapsed")
             },
             "min_dihedral_before_improvement": min(s.get("min_dihedral_before_improvement", 180.0) for s in self.stats),
             "seconds": {

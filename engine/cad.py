@@ -2,7 +2,7 @@
 
 :func:`load_cad` imports the file (STEP and IGES converted to millimetres, OpenCASCADE's default; a file
 without a solid is healed: faces sewn, solids made), fragments several solids (touching ones, which share a
-face after the fragment, are refused unless asked for as an assembly: see :class:`Assembly`) and tessellates
+face after the fragment, are an assembly: see :class:`Assembly`) and tessellates
 the CAD faces with OpenCASCADE's BRepMesh (Gmsh's 2-D mesher where that is not a valid solid) into one closed
 surface whose triangles know their CAD face. The
 :class:`Geometry` is that surface; the :class:`Features` are found on it with every CAD face a patch of its
@@ -111,8 +111,8 @@ class Interface:
 @dataclass
 class Assembly:
     """Touching solids of a CAD file: each body's own (Geometry, Features), its name (from the file, else
-    ``solid-N``), the CAD face tags of each of its patches and the CAD edge tags of each of its curves (the
-    union's as ``union_patch_faces`` / ``union_curve_edges``), and the shared faces."""
+    ``solid-N``), its CAD volume, the CAD face tags of each of its patches and the CAD edge tags of each of its
+    curves (the union's as ``union_patch_faces`` / ``union_curve_edges``), and the shared faces."""
 
     names: list
     bodies: list  # (Geometry, Features) per body
@@ -122,14 +122,15 @@ class Assembly:
     union_curve_edges: list
     interfaces: list  # Interface
     shared_faces: frozenset
+    volumes: list = dataclasses.field(default_factory=list)  # per body, its CAD solid's volume (OpenCASCADE's)
 
 
-def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_solids: bool = False, assembly=False):
-    """(Geometry, Features) of a STEP, IGES or BREP file (module docstring). Touching solids, with ``assembly``
-    (and ``allow_multiple_solids``): the Geometry is their union's outer surface, each face's body the solid it
-    bounds, and ``Features.assembly`` holds each solid's own (Geometry, Features) and the shared faces, for
-    :func:`engine.assembly.mesh_assembly`; without ``assembly`` they are refused (the pipeline does not mesh
-    them yet)."""
+def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_solids: bool = False, assembly=True):
+    """(Geometry, Features) of a STEP, IGES or BREP file (module docstring). Touching solids are an assembly
+    (all the file's solids its bodies, ``allow_multiple_solids`` or not): the Geometry is their union's outer
+    surface, each face's body the solid it bounds, and ``Features.assembly`` holds each solid's own (Geometry,
+    Features, CAD volume) and the shared faces, for :func:`engine.assembly.mesh_assembly`; with ``assembly``
+    False they are refused instead. Several solids none of which touch need ``allow_multiple_solids``."""
     path = Path(path)
     source = str(path)
     if path.suffix.lower() not in CAD_FORMATS:
@@ -153,22 +154,23 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         face_solids = [tuple(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist()) for tag in faces]
         shared = [k for k, owners in enumerate(face_solids) if len(owners) > 1]
         touching = len({b for k in shared for b in face_solids[k]})
-        if len(solids) > 1 and not allow_multiple_solids:
+        if len(solids) > 1 and not shared and not allow_multiple_solids:
             raise GeometryError(
-                f"the file holds {len(solids)} solids"
-                + (f", {touching} of which touch (they share {len(shared)} faces)" if shared else ""),
+                f"the file holds {len(solids)} solids",
                 where=source,
-                fix="set 'allow_multiple_solids: true' in the job's geometry to mesh each solid as a body"
-                + (" with conforming interfaces" if shared else "")
-                + ", or mesh them one at a time",
+                fix="set 'allow_multiple_solids: true' in the job's geometry to mesh each solid as a body, or mesh "
+                "them one at a time",
             )
         if shared and not assembly:
             raise GeometryError(
                 f"{touching} of the file's {len(solids)} solids touch (they share {len(shared)} faces, the first "
-                f"face-{faces[shared[0]]}): the pipeline does not mesh an assembly with conforming interfaces yet",
+                f"face-{faces[shared[0]]}): this caller does not mesh an assembly",
                 where=source,
-                fix="fuse the touching solids into one in the CAD tool, move them apart, or mesh them one at a time",
+                fix="mesh the file through the pipeline (fuzzymesh mesh), fuse the touching solids into one in the "
+                "CAD tool, or move them apart",
             )
+        allow_multiple_solids = allow_multiple_solids or bool(shared)  # an assembly's solids are all bodies
+        volumes = [float(gm.occ.getMass(3, int(tag))) for tag in solids] if shared else []
         solid_names = [_solid_name(gm.getEntityName(3, tag)) or f"solid-{k + 1}" for k, tag in enumerate(solids)]
         cad = _CadFaces(
             source,
@@ -235,6 +237,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 for a, b in pairs
             ],
             frozenset(int(faces[k]) for k in shared),
+            volumes,
         )
     return geometry, features
 

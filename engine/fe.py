@@ -2,10 +2,11 @@
 quadratic tetrahedra whose boundary follows the surface.
 
 Groups: ``solid`` (every tetrahedron), ``solid-1``, ``solid-2``, ... (the tetrahedra of each body,
-where the surface holds several), one per surface patch (its name, or its id such as ``patch-3``)
-with its boundary triangles, one per named or unnamed feature curve with its mesh edges, one per
-named corner. They become physical groups in ``.msh``, node sets, element sets and element-face
-surfaces in Abaqus ``.inp``, and element groups in ``.med``.
+where the surface holds several; an assembly's bodies named from the CAD file where it names them), an
+assembly's interfaces ``interface-<a>-<b>`` (the triangles two bodies share), one per surface patch (its
+name, or its id such as ``patch-3``) with its boundary triangles, one per named or unnamed feature curve with
+its mesh edges, one per named corner. They become physical groups in ``.msh``, node sets, element sets and
+element-face surfaces in Abaqus ``.inp``, and element groups (the solids only) in ``.med``.
 
 Every boundary face is a face of exactly one tetrahedron (:func:`tet_boundary`), outward, with that
 tet's edge mid-nodes; its patch is the mesher's for the same triangle, so a group never names a
@@ -48,12 +49,15 @@ class Group:
 
 
 def tet_bodies(mesh: TetMesh, geometry) -> np.ndarray:
-    """The body (0-based, as ``geometry.face_body``) of every tet.
+    """The body (0-based, as ``geometry.face_body``) of every tet: the mesher's (``mesh.body``, an assembly's)
+    where it knows it.
 
-    Tets joined through shared nodes form one piece; a piece belongs to the body whose surface is
+    Else tets joined through shared nodes form one piece; a piece belongs to the body whose surface is
     closest to the centroid of its largest tet (a point inside a body is closer to that body's own
     surface than to any other).
     """
+    if mesh.body is not None:
+        return np.asarray(mesh.body, np.int64)
     if geometry.bodies == 1:
         return np.zeros(len(mesh.tets), np.int64)
     n, first = len(mesh.points), np.repeat(mesh.tets[:, 0], 3)
@@ -66,11 +70,16 @@ def tet_bodies(mesh: TetMesh, geometry) -> np.ndarray:
 
 
 def feature_groups(mesh: TetMesh, features, body: np.ndarray | None = None) -> list[Group]:
-    """The solid, its bodies (``body``: 0-based per tet, from :func:`tet_bodies`), patches, curves and corners
-    as groups (see the module doc); patches, curves and corners only where the mesh has a tagged boundary."""
+    """The solid, its bodies (``body``: 0-based per tet, from :func:`tet_bodies`; named as an assembly names
+    them, else ``solid-N``), an assembly's interfaces (``mesh.interfaces``: the triangles two bodies share),
+    patches, curves and corners as groups (see the module doc); patches, curves and corners only where the
+    mesh has a tagged boundary."""
     groups = [Group("solid", 3, np.arange(len(mesh.tets)))]
     if body is not None and body.max(initial=0) > 0:
-        groups += [Group(f"solid-{b + 1}", 3, np.flatnonzero(body == b)) for b in range(body.max() + 1)]
+        assembly = getattr(features, "assembly", None)
+        names = assembly.names if assembly is not None else [f"solid-{b + 1}" for b in range(body.max() + 1)]
+        groups += [Group(names[b], 3, np.flatnonzero(body == b)) for b in range(body.max() + 1)]
+    groups += [Group(name, 2, np.asarray(t, np.int64)) for name, t in mesh.interfaces.items() if len(t)]
     if len(mesh.boundary) == 0:
         return groups
     owner, side, face_patch = tet_boundary(mesh)

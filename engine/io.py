@@ -116,16 +116,24 @@ def to_gmsh(model: FEModel) -> meshio.Mesh:
 
 
 def _group_cells(model: FEModel, group) -> np.ndarray:
-    """A lower-dimensional group's cells, with mid-edge nodes for a quadratic model."""
+    """A lower-dimensional group's cells, with mid-edge nodes for a quadratic model: a boundary face's from the
+    boundary's triangle6, an inner face's (an assembly's interface) from its tets' edges, as given."""
     if not model.quadratic or group.dim == 0:
         return group.cells
     if group.dim == 2:
         rows = row_index(np.sort(model.boundary[:, :3], axis=1), np.sort(group.cells, axis=1))
-        return model.boundary[rows]
+        if (rows >= 0).all():
+            return model.boundary[rows]
+        ends = np.stack([group.cells, np.roll(group.cells, -1, axis=1)], axis=2).reshape(-1, 2)  # (a b), (b c), (c a)
+        return np.column_stack([group.cells, _middles(model, ends).reshape(-1, 3)])
+    return np.column_stack([group.cells, _middles(model, group.cells)])
+
+
+def _middles(model: FEModel, ends: np.ndarray) -> np.ndarray:
+    """The mid-edge node of each edge ``ends`` (k, 2) of a quadratic model's tets."""
     edges = np.sort(model.tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
-    middle = model.tets[:, 4:].reshape(-1)
-    rows = row_index(edges, np.sort(group.cells, axis=1))
-    return np.column_stack([group.cells, middle[rows]])
+    rows = row_index(edges, np.sort(ends, axis=1))
+    return model.tets[:, 4:].reshape(-1)[rows]
 
 
 def write_abaqus(path, model: FEModel) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import logging
 import os
 import time
@@ -13,6 +14,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .acceptance import check_mesh
+from .assembly import mesh_assembly
 from .atomic import write_all_or_nothing
 from .audit import Audit, audit_mesh, idle_patterns
 from .cad import CAD_FORMATS, load_cad
@@ -76,7 +78,10 @@ def build_geometry(job: Job):
         features.lengths = dict(shape.lengths)
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
     if job.geometry_file.suffix.lower() in CAD_FORMATS:
-        return load_cad(job.geometry_file, job.feature_angle, allow_multiple_solids=job.allow_multiple_solids)
+        # touching solids are an assembly (no job key): Features.assembly, meshed by engine.assembly
+        return load_cad(
+            job.geometry_file, job.feature_angle, allow_multiple_solids=job.allow_multiple_solids, assembly=True
+        )
     geometry = load_surface(job.geometry_file, allow_multiple_solids=job.allow_multiple_solids)
     return geometry, detect_features(geometry, job.feature_angle)
 
@@ -237,6 +242,55 @@ def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict 
     return Prepared(kb, geometry, features, sizing)
 
 
+def _no_mesh(job: Job, what: str, error: Exception) -> MeshRejected:
+    return MeshRejected(
+        f"the {job.mesher} mesher made no valid mesh of the {what} of the {job.packer} packer: {error}",
+        check="meshing",
+        fix="if the job replaces the population rules or uses a plug-in packer or mesher, "
+        "check them; else mesh again with another seed and report the input",
+    )
+
+
+def _mesh_assembly(job: Job, packer, mesher, geometry, features, sizing, kb, timings: dict):
+    """(Packing, TetMesh) of touching solids (engine/assembly.py): each body packed and meshed in turn, the
+    packer's and the mesher's times summed into the ``packing`` and ``meshing`` timings."""
+    assembly = features.assembly
+    if "prescribed" not in inspect.signature(mesher).parameters:
+        raise JobError(
+            f"the file holds an assembly ({len(assembly.bodies)} touching solids) and the mesher '{job.mesher}' "
+            "cannot mesh one: it takes no prescribed interface triangles",
+            where=job.where("mesher"),
+            fix="use the default mesher 'delaunay'",
+        )
+    timings["packing"] = timings["meshing"] = 0.0
+
+    def timed(function, key):
+        def call(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                timings[key] += time.perf_counter() - start
+
+        return call
+
+    try:
+        mesh, packing = mesh_assembly(
+            timed(packer, "packing"), timed(mesher, "meshing"), geometry, features, sizing, seed=job.seed, knowledge=kb
+        )
+    except RuntimeError as error:  # a body's nodes make no mesh, or an interface lost its triangles
+        raise _no_mesh(job, f"assembly's {len(assembly.bodies)} bodies", error) from None
+    log.info(
+        "packing (%s): %d nodes in %d bodies (%s) (%.2f s)",
+        job.packer,
+        len(packing),
+        len(assembly.bodies),
+        ", ".join(assembly.names),
+        timings["packing"],
+    )
+    return packing, mesh
+
+
 def run(
     job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True, keep_invalid: bool = False
 ) -> Result:
@@ -248,20 +302,17 @@ def run(
         check_output_dir(job)
     packer, mesher = get_packer(job.packer), get_mesher(job.mesher)  # the plug-ins' contracts, before any work
     kb, geometry, features, sizing = prepare(job, max_elements, timings)
-    with stage("packing", timings):
-        packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
-    log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
-    with stage("meshing", timings):
-        try:
-            mesh = mesher(packing, geometry, features, seed=job.seed)
-        except RuntimeError as error:  # the nodes do not make a mesh of this solid
-            raise MeshRejected(
-                f"the {job.mesher} mesher made no valid mesh of the {len(packing)} nodes of the "
-                f"{job.packer} packer: {error}",
-                check="meshing",
-                fix="if the job replaces the population rules or uses a plug-in packer or mesher, "
-                "check them; else mesh again with another seed and report the input",
-            ) from None
+    if features.assembly is not None:
+        packing, mesh = _mesh_assembly(job, packer, mesher, geometry, features, sizing, kb, timings)
+    else:
+        with stage("packing", timings):
+            packing = packer(geometry, features, sizing, seed=job.seed, knowledge=kb)
+        log.info("packing (%s): %d nodes (%.2f s)", job.packer, len(packing), timings["packing"])
+        with stage("meshing", timings):
+            try:
+                mesh = mesher(packing, geometry, features, seed=job.seed)
+            except RuntimeError as error:  # the nodes do not make a mesh of this solid
+                raise _no_mesh(job, f"{len(packing)} nodes", error) from None
     log.info(
         "meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)",
         job.mesher,

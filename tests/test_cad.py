@@ -5,8 +5,9 @@ plate-cylinder junction, a hole whose wall is two faces, two boxes apart, and tw
 (two boxes sharing a face, a cylinder standing on a plate). Checked: each
 CAD face a patch named face-N with its type, holes and fillets with the CAD's radii, the junction's concave
 circle, exact surfaces (mesh nodes and 10-node mid-nodes on the CAD faces), the volume against the CAD's, the
-pipeline's gate and files, and the STEP
-part against its STL export.
+pipeline's gate and files, the assemblies through the CLI (each body and the interface a group of the .msh
+and .inp, the body volumes, the interface conforming at order 1 and 2, the gate's body volume and interface
+checks), and the STEP part against its STL export.
 """
 
 from __future__ import annotations
@@ -16,23 +17,20 @@ import math
 from pathlib import Path
 
 import gmsh
+import meshio
 import numpy as np
 import pytest
 
-from engine.acceptance import boundary_topology
-from engine.assembly import mesh_assembly
+from engine.acceptance import interface_sides
 from engine.cad import load_cad
+from engine.cli import main
 from engine.describe import solid_features
 from engine.errors import GeometryError
-from engine.exact import on_exact_surfaces
-from engine.fe import quadratic, side_cells, tet_boundary
+from engine.fe import TET10_EDGES, quadratic, row_index, side_cells, tet_boundary
 from engine.job import job_from_dict
-from engine.knowledge import load_knowledge
-from engine.mesh import FACES
-from engine.meshing import get_mesher
+from engine.mesh import FACES, signed_volumes
 from engine.meshing.improve import min_dihedrals
-from engine.packing import get_packer
-from engine.pipeline import build_sizing, run
+from engine.pipeline import run
 
 _spec = importlib.util.spec_from_file_location("make_parts", Path(__file__).parent / "parts" / "make_parts.py")
 make_parts = importlib.util.module_from_spec(_spec)
@@ -190,53 +188,111 @@ def test_step_part_meshes_onto_the_cad(step_files, tmp_path):
     assert result.quality["min_dihedral"]["min"] > 10
 
 
-def test_solids_apart_are_bodies_touching_ones_are_refused(step_files):
+def test_solids_apart_are_bodies_touching_ones_an_assembly(step_files):
     _, geometry, features = solid_features(step_files["apart"][0])
-    assert geometry.bodies == 2
+    assert geometry.bodies == 2 and features.assembly is None
     assert geometry.volume == pytest.approx(step_files["apart"][1], rel=2e-3)
     assert [p.cylinder.radius for p in features.patches if "hole" in p.kinds] == [5.0]
-    with pytest.raises(GeometryError, match="2 of the file's 2 solids touch .*share 1 faces.*not mesh an assembly"):
-        load_cad(step_files["two_boxes"][0], allow_multiple_solids=True)
+    with pytest.raises(GeometryError, match="holds 2 solids.*allow_multiple_solids"):
+        load_cad(step_files["apart"][0])
+    geometry, features = load_cad(step_files["two_boxes"][0])  # touching: an assembly, no key needed
+    assert geometry.bodies == 2 and features.assembly.names == ["solid-1", "solid-2"]
+    assert features.assembly.volumes == pytest.approx([40 * 30 * 20, 30 * 30 * 20])
+    with pytest.raises(
+        GeometryError, match="2 of the file's 2 solids touch .*share 1 faces.*does not mesh an assembly"
+    ):
+        load_cad(step_files["two_boxes"][0], assembly=False)
+
+
+def _cli_job(tmp_path: Path, path: Path, order: int = 1, knowledge: str | None = None, **keys) -> Path:
+    """A job file in tmp_path meshing ``path`` into tmp_path / out (vtu, msh, inp), with a knowledge folder
+    holding ``knowledge`` as sizing.yaml, if given."""
+    import yaml
+
+    data = {"geometry": {"file": str(path)}, **keys}
+    data["output"] = {"directory": "out", "formats": ["vtu", "msh", "inp"], "order": order}
+    if knowledge is not None:
+        (tmp_path / "kb").mkdir()
+        (tmp_path / "kb" / "sizing.yaml").write_text(knowledge)
+        data["knowledge"] = ["kb"]
+    job = tmp_path / "job.yaml"
+    job.write_text(yaml.safe_dump(data))
+    return job
+
+
+def _groups(mesh) -> dict:
+    """{name: cells} of a .msh read by meshio, from its physical tags."""
+    names = {int(tag): name for name, (tag, _) in mesh.field_data.items()}
+    out = {}
+    for block, tags in zip(mesh.cells, mesh.cell_data["gmsh:physical"]):
+        for tag in np.unique(tags):
+            out[names[int(tag)]] = block.data[tags == tag]
+    return out
 
 
 @pytest.mark.parametrize(
-    "part, size, volumes",
-    [("two_boxes", None, [40 * 30 * 20, 30 * 30 * 20]), ("cylinder_on_plate", 1.4, [60 * 60 * 8, math.pi * 100 * 20])],
+    "part, size, order, volumes",
+    [
+        ("two_boxes", 3.0, 2, [40 * 30 * 20, 30 * 30 * 20]),
+        ("cylinder_on_plate", 1.7, 1, [60 * 60 * 8, math.pi * 100 * 20]),
+    ],
 )
-def test_touching_solids_mesh_with_a_conforming_interface(step_files, part, size, volumes):
-    """OpenCASCADE's fragment, each solid meshed with the union's sizing, the shared face triangulated once:
-    every interface triangle is a face of one tet of each body (the same nodes on both sides), the outer
-    boundary a closed two-manifold, each body's volume that of its CAD solid."""
-    path = step_files[part][0]
-    job = job_from_dict(
-        {"geometry": {"file": str(path), "allow_multiple_solids": True}, **({"size": size} if size else {})}
-    )
-    geometry, features = load_cad(path, allow_multiple_solids=True, assembly=True)
-    assert [b.volume for b, _ in features.assembly.bodies] == pytest.approx(volumes, rel=5e-3)
-    kb = load_knowledge(job.knowledge)
-    sizing = build_sizing(job, geometry, features, kb)
-    mesh, _ = mesh_assembly(get_packer("bubble"), get_mesher("delaunay"), geometry, features, sizing, knowledge=kb)
-    mesh = on_exact_surfaces(mesh, geometry, features)[0]
-    volume = mesh.volumes()
-    assert volume.min() > 0
-    assert min_dihedrals(mesh.points, mesh.tets).min() >= 10
-    for b, expected in enumerate(volumes):
-        assert volume[mesh.body == b].sum() == pytest.approx(expected, rel=5e-3)
-    topology = boundary_topology(mesh.tets)
-    assert topology["open_edges"] == topology["misoriented"] == 0
-    (name, interface), *_ = mesh.interfaces.items()
-    assert name == "interface-solid-1-solid-2" and len(mesh.interfaces) == 1 and len(interface) > 50
-    sides = []
-    for b in (0, 1):  # each body's own boundary faces on the interface: the same triangles, opposite ways round
-        tets = mesh.tets[mesh.body == b]
-        faces = tets[:, FACES].reshape(-1, 3)
-        key = np.sort(faces, axis=1)
-        found = np.isin(key.view([("", key.dtype)] * 3), np.sort(interface, axis=1).view([("", key.dtype)] * 3))
-        sides.append(np.sort(key[found.ravel()], axis=0))
-    assert len(sides[0]) == len(sides[1]) == len(interface)
-    assert np.array_equal(np.unique(sides[0], axis=0), np.unique(sides[1], axis=0))
-    on_interface = np.unique(interface)
-    assert len(np.unique(mesh.points[on_interface], axis=0)) == len(on_interface)  # no duplicate nodes
+def test_an_assembly_meshes_through_the_cli(step_files, tmp_path, part, size, order, volumes):
+    """Touching solids of a STEP file, no job key: OpenCASCADE's fragment, each solid meshed with the union's
+    sizing, the shared face triangulated once. The .msh holds each body as a group whose volume is its CAD
+    solid's, the interface as a group of triangles (triangle6 at order 2) that are faces of tets of both bodies
+    (mid-edge nodes included), no duplicate nodes; the .inp each body's element set and the interface surface;
+    the VTU the body field; the report is written."""
+    job = _cli_job(tmp_path, step_files[part][0], order, size=size)
+    assert main(["mesh", str(job), "--quiet"]) == 0
+    out = tmp_path / "out"
+    assert (out / "mesh.report.html").is_file() and (out / "mesh.audit.json").is_file()
+    mesh = meshio.read(out / "mesh.msh")
+    groups = _groups(mesh)
+    assert len(np.unique(mesh.points, axis=0)) == len(mesh.points)  # the interface's nodes merged
+    solid, bodies = groups["solid"], [groups["solid-1"], groups["solid-2"]]
+    assert solid.shape[1] == (10 if order == 2 else 4)
+    assert min_dihedrals(mesh.points, solid[:, :4]).min() >= 10
+    for tets, expected in zip(bodies, volumes):
+        assert signed_volumes(mesh.points, tets[:, :4]).sum() == pytest.approx(expected, rel=5e-3)
+    body = meshio.read(out / "mesh.vtu").cell_data["body"][0]
+    assert np.bincount(body).tolist() == [0, len(bodies[0]), len(bodies[1])]
+    assert len(bodies[0]) + len(bodies[1]) == len(solid)
+    interface = groups["interface-solid-1-solid-2"]
+    assert interface.shape == (len(interface), 6 if order == 2 else 3) and len(interface) > 50
+    for tets in bodies:  # each interface triangle is a face of a tet of each body, its mid-edge nodes those tets'
+        faces = np.sort(tets[:, FACES].reshape(-1, 3), axis=1)
+        assert (row_index(faces, np.sort(interface[:, :3], axis=1)) >= 0).all()
+        if order == 2:
+            edges = np.sort(tets[:, TET10_EDGES].reshape(-1, 2), axis=1)
+            ends = np.stack([interface[:, :3], np.roll(interface[:, :3], -1, axis=1)], axis=2).reshape(-1, 2)
+            rows = row_index(edges, np.sort(ends, axis=1))
+            assert (rows >= 0).all()
+            assert np.array_equal(tets[:, 4:].reshape(-1)[rows], interface[:, 3:].ravel())
+    inp = meshio.read(out / "mesh.inp")
+    assert [len(inp.cell_sets[name][0]) for name in ("solid_1", "solid_2")] == [len(t) for t in bodies]
+    assert "*SURFACE, TYPE=ELEMENT, NAME=interface_solid_1_solid_2" in (out / "mesh.inp").read_text()
+
+
+def test_an_assembly_body_off_its_cad_volume_is_rejected(step_files, tmp_path, capsys):
+    """The gate's body volume: the union within 0.3 % of the CAD's, the cylinder's chords at size 2 without the
+    curvature pattern not; one line, exit 4, no files."""
+    knowledge = "kind: sizing\nbase_pattern: uniform-domain\nacceptance:\n  volume: 0.003\n"
+    job = _cli_job(tmp_path, step_files["cylinder_on_plate"][0], knowledge=knowledge, size=2.0)
+    assert main(["mesh", str(job), "--quiet"]) == 4
+    line = capsys.readouterr().err.strip().splitlines()[-1]
+    assert line.startswith("fuzzymesh: error: mesh rejected (body volume): the body 'solid-2' has -")
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_gate_counts_the_tets_on_each_interface_triangle():
+    """Two tets sharing a face: of different bodies, of one body, and apart (the interface's nodes not merged)."""
+    tets = np.array([[0, 1, 2, 3], [0, 2, 1, 4]])
+    count, different = interface_sides(tets, np.array([0, 1]), np.array([[0, 1, 2]]))
+    assert count.tolist() == [2] and different.tolist() == [True]
+    assert interface_sides(tets, np.array([1, 1]), np.array([[2, 1, 0]]))[1].tolist() == [False]
+    apart = np.array([[0, 1, 2, 3], [5, 7, 6, 4]])
+    assert interface_sides(apart, np.array([0, 1]), np.array([[0, 1, 2]]))[0].tolist() == [1]
 
 
 def test_a_face_opencascade_tessellates_badly_is_meshed_by_gmsh(step_files, caplog):
