@@ -31,7 +31,7 @@ ENTRIES = [
     ("packing: neighbour lists", "engine/packing/forces.py", "neighbour_lists"),
     ("packing: projection onto curves, patches", "engine/packing/constraints.py", "closest"),
     ("packing: population control", "engine/packing/bubble.py", "_control"),
-    ("sizing: element-count estimate", "engine/sizing.py", "estimate_counts"),
+    ("sizing: element-count estimate", "engine/sizing/counts.py", "estimate_counts"),
     ("meshing: Gmsh constrained Delaunay", "engine/meshing/tetra.py", "tetrahedralize"),
     ("meshing: surface triangulation", "engine/meshing/surface.py", "triangulate_boundary"),
     ("meshing: Gmsh optimiser", "engine/meshing/improve.py", "gmsh_optimize"),

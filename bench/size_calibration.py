@@ -1,5 +1,5 @@
 """Edge length / h on the built-in shapes: the measurement behind the bubble packer's ``diameter`` setting
-(knowledge/population.yaml, docs/rules.md section 2) and the element-count estimate (engine/sizing.py).
+(knowledge/population.yaml, docs/rules.md section 2) and the element-count estimate (engine/sizing/counts.py).
 
 For each shape at two sizes (the default H = bounding-box diagonal / 40, and a coarser one) it runs the
 whole pipeline without writing files and prints the median of edge length / h over the mesh's edges
