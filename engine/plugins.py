@@ -1,8 +1,11 @@
-"""The contracts of the plug-ins: what the pipeline passes a packer and a mesher, and what it expects back.
+"""The contracts of the named kinds: what the pipeline passes each and what it expects back.
 
-A job names them (``packer:``, ``mesher:``); built-ins register by decorator, others by the entry-point
-groups ``fuzzymesh.packers`` and ``fuzzymesh.meshers`` (engine/registry.py). docs/plugins.md has a worked
-example; tests/test_meshers.py runs the contract tests on every registered one, plug-ins included.
+One :class:`~engine.registry.Registry` per kind, each checking its entries against one of these protocols:
+packers and meshers (plug-in kinds: a job names them, ``packer:``, ``mesher:``; built-ins register by
+decorator, others by the entry-point groups ``fuzzymesh.packers`` and ``fuzzymesh.meshers``), the built-in
+shapes (``engine.shapes.SHAPES``), the validation cases (``engine.validation.CASES``) and the output
+writers (``engine.io.WRITERS``). docs/plugins.md has a worked example; tests/test_meshers.py runs the
+contract tests on every registered packer and mesher, plug-ins included.
 """
 
 from __future__ import annotations
@@ -10,12 +13,17 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Protocol
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from .features import Features
     from .geometry import Geometry
+    from .io import FEModel
     from .knowledge import KnowledgeBase
     from .mesh import TetMesh
     from .packing import Packing
+    from .shapes import Shape
     from .sizing import SizingField
+    from .validation import CaseResult
 
 
 class Packer(Protocol):
@@ -46,3 +54,24 @@ class Mesher(Protocol):
     """
 
     def __call__(self, packing: Packing, geometry: Geometry, features: Features, *, seed: int) -> TetMesh: ...
+
+
+class ShapeBuilder(Protocol):
+    """Builds a built-in solid: ``build(**parameters) -> Shape``, the parameters those of the schema it is
+    registered with (``@SHAPES.register(name, parameters={...})``, each a validated ``engine.schema.Field``)."""
+
+    def __call__(self, **parameters) -> Shape: ...
+
+
+class ValidationCase(Protocol):
+    """Meshes, solves and compares one validation case: ``run(*, scale, seed) -> CaseResult`` (``scale``
+    multiplies every target size)."""
+
+    def __call__(self, *, scale: float, seed: int) -> CaseResult: ...
+
+
+class Writer(Protocol):
+    """Writes one output format: ``write(path, model)``, the FE model (``engine.io.FEModel``) to ``path`` (a
+    temporary file that the all-or-nothing output renames, engine/atomic.py)."""
+
+    def __call__(self, path: Path, model: FEModel) -> None: ...
