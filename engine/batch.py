@@ -141,7 +141,7 @@ def _values(raw, name: str, where: str) -> list:
 
 def _key_field(key: str, shape: str | None, where: str) -> tuple[tuple, Field]:
     """The job-mapping path and Field of a varied key: a (dotted) job key or a shape parameter."""
-    shape_fields = SHAPES[shape][1] if shape in SHAPES else {}
+    shape_fields = SHAPES.details(shape)["parameters"] if shape in SHAPES else {}
     path = tuple(str(key).split("."))
     if path[:2] == ("geometry", "parameters") and len(path) == 3:
         path = path[2:]

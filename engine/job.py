@@ -155,7 +155,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         )
     parameters = {}
     if geo["shape"] is not None:
-        _, schema = SHAPES[geo["shape"]]
+        schema = SHAPES.details(geo["shape"])["parameters"]
         raw_params = geo_raw.get("parameters") or Located()
         if not isinstance(raw_params, Located):
             raw_params = located(raw_params, source)

@@ -19,9 +19,16 @@ import numpy as np
 
 from .errors import JobError
 from .geometry import Geometry, validate_surface
+from .plugins import ShapeBuilder
+from .registry import Registry
 from .schema import NUMBER, STRING, Field, finite, non_negative, positive
 
 CHORDAL_ERROR = 1e-3  # sagitta / radius
+SHAPES = Registry(None, [], ShapeBuilder, noun="shape")  # @SHAPES.register(name, parameters={...}) below
+
+
+def _p(default, doc, check=positive):
+    return Field(NUMBER, default=default, check=check, doc=doc)
 
 
 def segments_for(span_radians: float = 2 * math.pi) -> int:
@@ -135,6 +142,7 @@ def _box(lx, ly, lz) -> m3.Manifold:
     return m3.Manifold.cube([lx, ly, lz]).translate([-lx / 2, -ly / 2, 0])
 
 
+@SHAPES.register("cylinder", parameters={"radius": _p(25.0, "cylinder radius"), "height": _p(100.0, "cylinder height")})
 def cylinder(radius: float, height: float) -> Shape:
     """Solid circular cylinder on the z=0 plane, axis z (the paper's Fig. 7)."""
     solid = m3.Manifold.cylinder(height, radius, radius, segments_for())
@@ -155,6 +163,14 @@ def cylinder(radius: float, height: float) -> Shape:
     )
 
 
+@SHAPES.register(
+    "plate",
+    parameters={
+        "length": _p(200.0, "plate length (x)"),
+        "width": _p(200.0, "plate width (y)"),
+        "thickness": _p(20.0, "plate thickness (z)"),
+    },
+)
 def plate(length: float, width: float, thickness: float) -> Shape:
     """Rectangular plate centred on the z axis, bottom face on z=0."""
     solid = _box(length, width, thickness)
@@ -168,6 +184,17 @@ def plate(length: float, width: float, thickness: float) -> Shape:
     )
 
 
+@SHAPES.register(
+    "plate_with_hole",
+    parameters={
+        "length": _p(200.0, "plate length (x)"),
+        "width": _p(100.0, "plate width (y)"),
+        "thickness": _p(10.0, "plate thickness (z)"),
+        "hole_radius": _p(10.0, "hole radius"),
+        "hole_x": _p(0.0, "hole centre x", finite),
+        "hole_y": _p(0.0, "hole centre y", finite),
+    },
+)
 def plate_with_hole(
     length: float, width: float, thickness: float, hole_radius: float, hole_x: float, hole_y: float
 ) -> Shape:
@@ -194,6 +221,17 @@ def plate_with_hole(
     )
 
 
+@SHAPES.register(
+    "plate_cylinder_junction",
+    parameters={
+        "length": _p(200.0, "plate length (x)"),
+        "width": _p(200.0, "plate width (y)"),
+        "thickness": _p(20.0, "plate thickness (z)"),
+        "radius": _p(25.0, "cylinder radius"),
+        "height": _p(100.0, "cylinder height above the plate"),
+        "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", finite),
+    },
+)
 def plate_cylinder_junction(
     length: float, width: float, thickness: float, radius: float, height: float, offset: float
 ) -> Shape:
@@ -233,6 +271,16 @@ def plate_cylinder_junction(
     )
 
 
+@SHAPES.register(
+    "l_bracket",
+    parameters={
+        "leg_length": _p(80.0, "base leg length (x)"),
+        "leg_height": _p(80.0, "upright leg height (z)"),
+        "thickness": _p(15.0, "leg thickness"),
+        "width": _p(40.0, "extrusion width (y)"),
+        "fillet_radius": _p(8.0, "inner corner fillet radius (0 = sharp)", non_negative),
+    },
+)
 def l_bracket(leg_length: float, leg_height: float, thickness: float, width: float, fillet_radius: float) -> Shape:
     """L-shaped bracket: a base leg along x, an upright leg along z, the inner corner filleted.
 
@@ -279,6 +327,19 @@ def l_bracket(leg_length: float, leg_height: float, thickness: float, width: flo
     )
 
 
+@SHAPES.register(
+    "cracked_plate",
+    parameters={
+        "length": _p(200.0, "plate length (x)"),
+        "width": _p(100.0, "plate width (y)"),
+        "thickness": _p(20.0, "plate thickness (z)"),
+        "crack": Field(
+            STRING, default="semi-elliptical", choices=("straight", "semi-elliptical"), doc="crack front shape"
+        ),
+        "crack_length": _p(20.0, "crack length (straight) or half-length (semi-elliptical)"),
+        "crack_depth": _p(10.0, "depth of the semi-elliptical crack into the thickness"),
+    },
+)
 def cracked_plate(
     length: float, width: float, thickness: float, crack: str, crack_length: float, crack_depth: float
 ) -> Shape:
@@ -347,6 +408,10 @@ def spherical_patch(centre, radius: float, tol: float) -> Callable:
     return test
 
 
+@SHAPES.register(
+    "hollow_sphere_octant",
+    parameters={"inner_radius": _p(50.0, "inner radius"), "outer_radius": _p(100.0, "outer radius")},
+)
 def hollow_sphere_octant(inner_radius: float, outer_radius: float) -> Shape:
     """One eighth (x, y, z >= 0) of a thick hollow sphere centred on the origin, for Lamé's problem.
 
@@ -379,73 +444,6 @@ def hollow_sphere_octant(inner_radius: float, outer_radius: float) -> Shape:
     )
 
 
-def _p(default, doc, check=positive):
-    return Field(NUMBER, default=default, check=check, doc=doc)
-
-
-SHAPES = {
-    "cylinder": (cylinder, {"radius": _p(25.0, "cylinder radius"), "height": _p(100.0, "cylinder height")}),
-    "plate": (
-        plate,
-        {
-            "length": _p(200.0, "plate length (x)"),
-            "width": _p(200.0, "plate width (y)"),
-            "thickness": _p(20.0, "plate thickness (z)"),
-        },
-    ),
-    "plate_with_hole": (
-        plate_with_hole,
-        {
-            "length": _p(200.0, "plate length (x)"),
-            "width": _p(100.0, "plate width (y)"),
-            "thickness": _p(10.0, "plate thickness (z)"),
-            "hole_radius": _p(10.0, "hole radius"),
-            "hole_x": _p(0.0, "hole centre x", finite),
-            "hole_y": _p(0.0, "hole centre y", finite),
-        },
-    ),
-    "plate_cylinder_junction": (
-        plate_cylinder_junction,
-        {
-            "length": _p(200.0, "plate length (x)"),
-            "width": _p(200.0, "plate width (y)"),
-            "thickness": _p(20.0, "plate thickness (z)"),
-            "radius": _p(25.0, "cylinder radius"),
-            "height": _p(100.0, "cylinder height above the plate"),
-            "offset": _p(60.0, "cylinder axis x from the plate centre (0 = centre)", finite),
-        },
-    ),
-    "l_bracket": (
-        l_bracket,
-        {
-            "leg_length": _p(80.0, "base leg length (x)"),
-            "leg_height": _p(80.0, "upright leg height (z)"),
-            "thickness": _p(15.0, "leg thickness"),
-            "width": _p(40.0, "extrusion width (y)"),
-            "fillet_radius": _p(8.0, "inner corner fillet radius (0 = sharp)", non_negative),
-        },
-    ),
-    "cracked_plate": (
-        cracked_plate,
-        {
-            "length": _p(200.0, "plate length (x)"),
-            "width": _p(100.0, "plate width (y)"),
-            "thickness": _p(20.0, "plate thickness (z)"),
-            "crack": Field(
-                STRING, default="semi-elliptical", choices=("straight", "semi-elliptical"), doc="crack front shape"
-            ),
-            "crack_length": _p(20.0, "crack length (straight) or half-length (semi-elliptical)"),
-            "crack_depth": _p(10.0, "depth of the semi-elliptical crack into the thickness"),
-        },
-    ),
-    "hollow_sphere_octant": (
-        hollow_sphere_octant,
-        {"inner_radius": _p(50.0, "inner radius"), "outer_radius": _p(100.0, "outer radius")},
-    ),
-}
-
-
 def build_shape(kind: str, parameters: dict) -> Shape:
     """Build shape ``kind`` from already validated ``parameters``."""
-    builder, _ = SHAPES[kind]
-    return builder(**parameters)
+    return SHAPES.get(kind)(**parameters)

@@ -13,7 +13,7 @@ from engine.shapes import SHAPES, build_shape
 
 @functools.lru_cache(maxsize=None)
 def shape_and_features(kind: str, **parameters):
-    _, schema = SHAPES[kind]
+    schema = SHAPES.details(kind)["parameters"]
     shape = build_shape(kind, validate(parameters, schema))
     features = detect_features(shape.geometry, 30.0, shape.face_groups)
     return shape, apply_names(features, shape.name_rules, shape.given_curves)

@@ -103,7 +103,9 @@ def solid_volume(name: str) -> float:
 
         return float(trimesh.load(EXAMPLES / job["geometry"]["file"]).volume)
     kind = job["geometry"]["shape"]
-    return build_shape(kind, validate(job["geometry"].get("parameters", {}), SHAPES[kind][1])).geometry.volume
+    return build_shape(
+        kind, validate(job["geometry"].get("parameters", {}), SHAPES.details(kind)["parameters"])
+    ).geometry.volume
 
 
 def face_neighbours(tets: np.ndarray) -> np.ndarray:
