@@ -12,8 +12,17 @@ import importlib
 from dataclasses import dataclass, field
 
 from ..errors import FuzzymeshError
+from ..plugins import ValidationCase
+from ..registry import Registry
 
-CASES = {"plate-hole": "plate_hole", "sphere": "sphere"}
+# each case's module imports the 'fe' extra, so it is named here and imported when the case is run
+CASES = Registry(
+    None,
+    [],
+    ValidationCase,
+    noun="validation case",
+    lazy={"plate-hole": f"{__name__}.plate_hole:run", "sphere": f"{__name__}.sphere:run"},
+)
 EXTRA = ("skfem", "pyamg")  # modules of the 'fe' extra: scikit-fem, pyamg
 
 
@@ -104,7 +113,7 @@ def run_case(name: str, scale: float = 1.0, seed: int = 0) -> CaseResult:
     if name not in CASES:
         raise FuzzymeshError(f"no validation case named '{name}'", fix=f"known cases: {', '.join(CASES)}")
     require_fe()
-    return importlib.import_module(f"{__name__}.{CASES[name]}").run(scale=scale, seed=seed)
+    return CASES.get(name)(scale=scale, seed=seed)
 
 
 __all__ = ["CASES", "CaseResult", "Row", "require_fe", "run_case"]
