@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import meshio
@@ -12,9 +13,12 @@ import numpy as np
 from .atomic import Target
 from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
 from .mesh import TetMesh
+from .plugins import Writer
+from .registry import Registry
 from .topology import face_owners
 
 ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}  # C3D4/C3D10 face by the local index of the opposite node
+WRITERS = Registry(None, [], Writer, noun="writer")  # one per output format: @WRITERS.register("vtu") below
 
 
 @dataclass
@@ -136,6 +140,25 @@ def _middles(model: FEModel, ends: np.ndarray) -> np.ndarray:
     return model.tets[:, 4:].reshape(-1)[rows]
 
 
+@WRITERS.register("vtu")
+def write_vtu(path, model: FEModel) -> None:
+    """VTU (ParaView): the tetrahedra with node tags and the audit fields."""
+    meshio.write(path, to_meshio(model, audit=True), file_format="vtu")
+
+
+@WRITERS.register("msh")
+def write_gmsh(path, model: FEModel) -> None:
+    """Gmsh 2.2 binary: tets and every group's cells with their physical groups."""
+    meshio.write(path, to_gmsh(model), file_format="gmsh22", binary=True)
+
+
+@WRITERS.register("med")
+def write_med(path, model: FEModel) -> None:
+    """MED (Salome, code_aster): the VTU's tetrahedra and fields, the element groups as families."""
+    meshio.write(path, to_med(model), file_format="med")
+
+
+@WRITERS.register("inp")
 def write_abaqus(path, model: FEModel) -> None:
     """Abaqus input: C3D4/C3D10 elements, a node set per group, the solid's element set, and an
     element-face surface per surface group (for loads and contact)."""
@@ -159,6 +182,7 @@ def write_abaqus(path, model: FEModel) -> None:
         handle.write("\n".join(lines) + ("\n" if lines else ""))
 
 
+@WRITERS.register("bdf")
 def write_nastran(path, model: FEModel) -> None:
     """Nastran bulk data: GRID* (large field, 16-character reals) and CTETRA (4 or 10 nodes, PSOLID 1).
 
@@ -187,14 +211,7 @@ def _abaqus_name(name: str) -> str:
 def mesh_targets(model: FEModel, directory: Path, name: str, formats: list[str]) -> list[Target]:
     """The files of ``model``: ``directory/name.<format>`` for each format and the audit legend
     ``name.audit.json``, as (path, write) targets for :func:`engine.atomic.write_all_or_nothing`."""
-    writers = {
-        "vtu": lambda tmp: meshio.write(tmp, to_meshio(model, audit=True), file_format="vtu"),
-        "msh": lambda tmp: meshio.write(tmp, to_gmsh(model), file_format="gmsh22", binary=True),
-        "inp": lambda tmp: write_abaqus(tmp, model),
-        "bdf": lambda tmp: write_nastran(tmp, model),
-        "med": lambda tmp: meshio.write(tmp, to_med(model), file_format="med"),
-    }
-    targets = [(Path(directory) / f"{name}.{fmt}", writers[fmt]) for fmt in formats]
+    targets = [(Path(directory) / f"{name}.{fmt}", partial(WRITERS.get(fmt), model=model)) for fmt in formats]
     if model.legend is not None:
         targets.append(
             (
