@@ -99,3 +99,48 @@ def test_lint_needs_no_geometry_library():
         [sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=ENGINE.parent
     ).stdout.strip()
     assert out == "[]"
+
+
+def test_every_named_kind_is_one_registry_checked_against_its_contract():
+    """Packers, meshers, shapes, validation cases and output writers: one Registry each (engine/registry.py), each
+    entry taking what its Protocol of engine/plugins.py passes; a writer for every output format of a job."""
+    from engine import plugins
+    from engine.io import WRITERS
+    from engine.job import OUTPUT_FORMATS
+    from engine.meshing import MESHERS
+    from engine.packing import PACKERS
+    from engine.registry import Registry
+    from engine.shapes import SHAPES
+    from engine.validation import CASES
+
+    kinds = {
+        PACKERS: plugins.Packer,
+        MESHERS: plugins.Mesher,
+        SHAPES: plugins.ShapeBuilder,
+        CASES: plugins.ValidationCase,
+        WRITERS: plugins.Writer,
+    }
+    for registry, contract in kinds.items():
+        assert isinstance(registry, Registry) and registry.contract is contract
+        assert len(registry) > 0
+        for name in registry.names():
+            assert callable(registry.get(name)), f"{registry.noun} '{name}'"
+    assert list(WRITERS) and set(WRITERS) == set(OUTPUT_FORMATS)
+    assert all(SHAPES.details(name)["parameters"] for name in SHAPES)
+
+
+def test_a_registry_names_an_unknown_entry_and_refuses_one_off_its_contract():
+    import pytest
+
+    from engine.errors import JobError
+    from engine.plugins import Writer
+    from engine.registry import Registry
+
+    writers = Registry(None, [], Writer, noun="writer")
+    writers.register("ok")(lambda path, model: None)
+    writers.register("bad")(lambda path: None)
+    assert writers.get("ok") and list(writers) == ["ok", "bad"] and "ok" in writers
+    with pytest.raises(JobError, match="no writer named 'x'"):
+        writers.get("x")
+    with pytest.raises(JobError, match="does not take what the pipeline passes"):
+        writers.get("bad")
