@@ -31,11 +31,12 @@ import trimesh
 from scipy import sparse
 from scipy.sparse import csgraph
 
-from .thickness import LocalPart, classes
+from .thickness import LocalPart, class_rows, classes
 
 PLANAR = 10.0  # radii above this, times the model size, are planar (inf)
 EDGE_PER_H = 1.1  # mean boundary edge / h of a packing (mean 1.07-1.11, knowledge/population.yaml calibration)
-RAISE_STEP = 1.05  # per_circle is raised in steps of 5 % to meet a volume budget
+RAISE_STEP = 1.05  # per_circle is raised in steps of 5 % to meet a volume budget ...
+MAX_RAISES = 2000  # ... at most this many steps over all classes
 
 
 @dataclass
@@ -51,24 +52,44 @@ class Curvature:
         """The curved faces in classes of like radius, most curved first (ids ``radius-R``)."""
         return classes(self.triangles, self.radius, "radius")
 
-    def chord_volume_change(self, per_circle: np.ndarray, finest: float, size: float) -> np.ndarray:
-        """Predicted volume change (k,) of meshing the curved faces with straight-sided triangles of edge
-        2 pi r / per_circle (k,) (within [finest, size]): a triangle of edge h inscribed in a surface of mean
-        curvature k_m lies k_m h^2 / 8 inside it on average (exact on a sphere: h^2 / 8 r, the centroid
-        h^2 / 6 r), so convex faces lose volume and concave ones (holes, fillets) gain it."""
-        edge = np.clip(2 * np.pi * self.radius / np.asarray(per_circle, float)[:, None], finest, size) * EDGE_PER_H
-        edge = np.where(np.isfinite(self.radius), edge, 0.0)
-        return -(self.area * self.mean * edge**2).sum(axis=1) / 8
+    def raised_per_circle(self, volume: float, budget: float, per_circle: float, finest: float, size: float):
+        """Elements per circle for each class of :meth:`parts` (by id) so that the predicted volume change of
+        the chords on the faces the rule sizes is within ``budget`` x ``volume``, raised where it pays most;
+        with the relative change before and after (signed).
 
-    def per_circle_for_volume(self, volume: float, budget: float, per_circle: float, finest: float, size: float):
-        """The smallest of per_circle x 1.05^i (i <= 30, up to 4.3 x) whose predicted chord volume change
-        (:meth:`chord_volume_change`) is within ``budget`` x ``volume``; with the relative changes at
-        ``per_circle`` and at the one returned (signed)."""
-        ladder = per_circle * RAISE_STEP ** np.arange(31)
-        change = self.chord_volume_change(ladder, finest, size) / volume
-        within = np.flatnonzero(np.abs(change) <= budget)
-        i = within[0] if len(within) else len(ladder) - 1
-        return float(np.ceil(ladder[i])), float(change[0]), float(change[i])
+        A straight-sided triangle of edge e inscribed in a surface of mean curvature k lies k e^2 / 8 inside it
+        on average (exact on a sphere), so a class of radius L meshed at h = 2 pi L / n (within [finest, size];
+        e = EDGE_PER_H h) changes the volume by -e^2 / 8 x the sum of area x k over its faces: convex faces lose
+        volume, concave ones (holes, fillets) gain it. While the sum over the classes exceeds the budget, the
+        class whose next step of RAISE_STEP removes the most change per added surface element (area / h^2) is
+        raised: large convex radii first, small fillets last (they change the volume little for many
+        elements). The rule answers for the classes it sizes (2 pi L / per_circle below ``size``): a face of
+        larger radius is sized by ``size``, and so is a plane's faceting noise next to a fillet."""
+        rows = class_rows(self.radius)
+        if not rows:
+            return {}, 0.0, 0.0
+        ids = [part.id for part in self.parts()]
+        length = np.array([r[0] for r in rows])
+        weighted = np.array([(self.area[r[2]] * self.mean[r[2]]).sum() for r in rows])  # sum of area x k
+        area = np.array([self.area[r[2]].sum() for r in rows])
+        active = 2 * np.pi * length / per_circle < size  # the classes the rule sizes
+        edge = lambda n: np.clip(2 * np.pi * length / n, finest, size) * EDGE_PER_H  # noqa: E731
+        change = lambda n: -(np.where(active, weighted, 0.0) * edge(n) ** 2).sum() / 8 / volume  # noqa: E731
+        n = np.full(len(rows), float(per_circle))
+        before = change(n)
+        for _ in range(MAX_RAISES):
+            now = change(n)
+            if abs(now) <= budget:
+                break
+            step = n[None, :] * np.where(np.eye(len(n), dtype=bool), RAISE_STEP, 1.0)  # one class raised per row
+            gain = abs(now) - np.abs([change(row) for row in step])
+            cost = area * (1 / edge(step.diagonal()) ** 2 - 1 / edge(n) ** 2)
+            best = int(np.argmax(np.where(active & (cost > 0), gain / np.maximum(cost, 1e-300), -np.inf)))
+            if not active[best] or gain[best] <= 0 or cost[best] <= 0:
+                break  # no class left whose raise helps (each at its finest size, or the change from others)
+            n[best] *= RAISE_STEP
+        n = np.where(n > per_circle, np.ceil(n), per_circle)
+        return {i: float(k) for i, k in zip(ids, n) if k > per_circle}, float(before), float(change(n))
 
     @property
     def area(self) -> np.ndarray:

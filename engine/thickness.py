@@ -73,18 +73,25 @@ def classes(triangles: np.ndarray, measure: np.ndarray, prefix: str) -> list[Loc
     """Pieces (m, 3, 3) with a measure each (inf: none) in classes, smallest first: a class starts at the smallest
     measure L not in one yet and takes every piece measuring below q L, q = ``CLASS_RATIO`` (so measures scattered
     about a power of q make one class, not two). One part per class: L, its pieces, id ``PREFIX-q^k`` (q^k <= L)."""
+    return [
+        LocalPart(f"{prefix}-{CLASS_RATIO**level:.3g}", length, triangles[rows])
+        for length, level, rows in class_rows(measure)
+    ]
+
+
+def class_rows(measure: np.ndarray) -> list[tuple[float, float, np.ndarray]]:
+    """The classes of :func:`classes` as (L, k with q^k <= L, sorted rows of their pieces), smallest first."""
     order = np.flatnonzero(np.isfinite(measure))
     order = order[np.argsort(measure[order], kind="stable")]
     values = measure[order]
-    parts, start = [], 0
+    out, start = [], 0
     while start < len(order):
         end = int(np.searchsorted(values, values[start] * CLASS_RATIO))
-        level = np.floor(np.log(values[start]) / np.log(CLASS_RATIO))
-        parts.append(
-            LocalPart(f"{prefix}-{CLASS_RATIO**level:.3g}", float(values[start]), triangles[np.sort(order[start:end])])
+        out.append(
+            (float(values[start]), np.floor(np.log(values[start]) / np.log(CLASS_RATIO)), np.sort(order[start:end]))
         )
         start = end
-    return parts
+    return out
 
 
 def local_size(geometry) -> LocalSize:

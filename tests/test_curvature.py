@@ -17,7 +17,7 @@ import trimesh
 import yaml
 
 from engine.cli import main
-from engine.curvature import measure
+from engine.curvature import Curvature, measure
 from engine.errors import LimitError
 from engine.explain import explain_point
 from engine.job import job_from_dict
@@ -105,23 +105,30 @@ def test_chord_curvature_of_both_principal_curvatures():
     assert _chord_curvature(turn @ operators @ turn.T) == pytest.approx(expected, rel=1e-12)
 
 
-def test_chord_volume_change_of_a_round_bar_and_a_tube():
+def test_chord_volume_budget_on_a_round_bar_a_tube_and_a_filleted_bar():
     """Straight chords lose mean curvature x edge^2 / 8 per area on a convex face, gain it on a concave one: a
     round bar at 24 per circle loses about 1.1 % (1.21 (2 pi / 24)^2 / 8 predicted, (2 pi / 24)^2 / 6 for the
-    polygon), which the 0.4 % budget raises to 40 per circle; so does a tube at 24 per circle on both of its
-    surfaces, but where both get the same size (H below 2 pi r / 24) its inner and outer chords cancel."""
+    polygon), which the 0.4 % budget raises to 40 per circle; a thin tube's inner and outer faces get one size
+    (one class of radius) and their chords cancel. With small concave fillets, the bar's class is raised, not
+    theirs (they change the volume little for many elements)."""
     bar = measure(trimesh.creation.cylinder(10, 50, sections=96))
     volume = np.pi * 10**2 * 50
-    change = bar.chord_volume_change(np.array([24.0, 48.0]), 0.0, np.inf) / volume
-    expected = -(1.1**2) / 8 * (2 * np.pi / np.array([24, 48])) ** 2
-    assert change == pytest.approx(expected, rel=0.01)
-    per_circle, before, after = bar.per_circle_for_volume(volume, 0.004, 24, 0.0, np.inf)
-    assert per_circle == 40 and before == pytest.approx(expected[0], rel=0.01) and -0.004 <= after < 0
+    raised, before, after = bar.raised_per_circle(volume, 0.004, 24, 0.0, np.inf)
+    assert before == pytest.approx(-(1.1**2) / 8 * (2 * np.pi / 24) ** 2, rel=0.01)
+    assert list(raised.values()) == [40] and -0.004 <= after < 0
     tube = measure(trimesh.creation.annulus(9.5, 10, height=50, sections=96))
     tube_volume = np.pi * (10**2 - 9.5**2) * 50
-    assert tube.per_circle_for_volume(tube_volume, 0.004, 24, 0.0, np.inf)[0] == 40  # both polygons lose
-    per_circle, before, _ = tube.per_circle_for_volume(tube_volume, 0.004, 24, 0.0, 1.0)  # h = 1 on both
-    assert per_circle == 24 and abs(before) < 0.001
+    assert len(tube.parts()) == 1  # radii 9.5 and 10: one class, one size, so inner and outer chords cancel
+    raised, before, _ = tube.raised_per_circle(tube_volume, 0.004, 24, 0.0, np.inf)
+    assert raised == {} and abs(before) < 0.001
+    # a bar's convex face (radius 10) and its small concave fillets (radius 1): the bar's is raised
+    unit = np.array([[0.0, 0, 0], [1, 0, 0], [0, 2, 0]])  # area 1
+    faces = np.concatenate([np.repeat(unit[None], 100, 0), np.repeat(unit[None] * 0.3, 100, 0)])
+    radius, mean = np.repeat([10.0, 1.0], 100), np.repeat([0.05, -0.5], 100)
+    bar_and_fillets = Curvature(faces, radius, mean)
+    raised, before, after = bar_and_fillets.raised_per_circle(1000.0, 0.004, 24, 0.0, np.inf)
+    bar_class = [part.id for part in bar_and_fillets.parts() if part.length == 10.0]
+    assert list(raised) == bar_class and before < -0.004 and abs(after) <= 0.004
 
 
 def test_cad_tessellations_of_a_torus_coarse_and_fine(torus_stl):

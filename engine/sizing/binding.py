@@ -163,8 +163,7 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
     placed = []
     for placement in placements:
         pattern = check_placement(kb, placement)
-        if pattern.anchor == "curvature":
-            placement = _within_volume_budget(pattern, placement, features, geometry, global_size)
+        raised = _volume_budget(pattern, placement, features, geometry, global_size)
         anchors = _anchors(pattern, placement, features, geometry)
         local = pattern.anchor in LOCAL_SCALES
         if not anchors and not local:
@@ -178,7 +177,7 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
         for feature, make_distance in anchors:
             one = _bind_one(
                 pattern,
-                placement,
+                _raised(placement, raised.get(getattr(feature, "id", None))),
                 feature,
                 make_distance,
                 features,
@@ -191,32 +190,42 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
     return placed
 
 
-def _within_volume_budget(pattern, placement, features, geometry, global_size):
-    """The curvature placement with 'per_circle' raised until the chords' predicted volume change is within
-    its 'volume_change' share of the solid's volume (0: as placed); see patterns/curvature.yaml."""
+def _volume_budget(pattern, placement, features, geometry, global_size) -> dict:
+    """{curvature class id: per_circle} for a curvature placement whose chords would change the volume by
+    more than its 'volume_change' (0: off); {} otherwise. See patterns/curvature.yaml."""
+    if pattern.anchor != "curvature":
+        return {}
     params = {name: p.default for name, p in pattern.parameters.items()} | placement.parameters
     budget = float(params.get("volume_change", 0.0))
     if budget <= 0:
-        return placement
-    per_circle, before, after = curvature(geometry, features.feature_angle).per_circle_for_volume(
+        return {}
+    raised, before, after = curvature(geometry, features.feature_angle).raised_per_circle(
         float(geometry.mesh.volume),
         budget,
         float(params["per_circle"]),
         float(params["finest"]) * global_size,
         global_size,
     )
-    if per_circle <= float(params["per_circle"]):
+    if raised:
+        log.info(
+            "%s: at %g elements per circle the chords of the curved faces it sizes would change the volume by "
+            "%+.2f %%; "
+            "raised on %d of its radius classes (%s) to keep it to %+.2f %% (volume_change %g %%)",
+            placement.id,
+            params["per_circle"],
+            100 * before,
+            len(raised),
+            ", ".join(f"{part} {n:g}" for part, n in raised.items()),
+            100 * after,
+            100 * budget,
+        )
+    return raised
+
+
+def _raised(placement, per_circle: float | None):
+    """The placement with 'per_circle' replaced, or as it is (None)."""
+    if per_circle is None:
         return placement
-    log.info(
-        "%s: %g elements per circle would change the volume by %+.2f %% (straight chords on curved faces); "
-        "%g keeps it to %+.2f %% (volume_change %g %%)",
-        placement.id,
-        params["per_circle"],
-        100 * before,
-        per_circle,
-        100 * after,
-        100 * budget,
-    )
     return replace(placement, parameters={**placement.parameters, "per_circle": per_circle})
 
 
