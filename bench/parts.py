@@ -9,9 +9,10 @@ For every part and tessellation (coarse, fine) of ``tests/parts/make_parts.py``:
   ``Mesh.MeshSizeMax`` = the same diagonal / 40.
 
 Each case gets a wall-clock timeout; one run per case (the times are single runs, not medians). Every mesh
-is measured here, the same way whoever made it: tetrahedra, minimum dihedral angle (numpy, below), volume
+is measured here, the same way whoever made it: tetrahedra, minimum dihedral angle, volume
 error against the STL's and the CAD volume, and a two-sided Hausdorff distance between the mesh boundary
-and the STL (sampled). Writes ``bench/parts.json`` and ``bench/parts.md``.
+and the STL (sampled), by the engine's own measures (``quality.tet_quality``,
+``quality.surface_distances``: those of the acceptance gate). Writes ``bench/parts.json`` and ``bench/parts.md``.
 
     python bench/parts.py [--parts DIR] [--work DIR] [--names NAME ...] [--timeout 300]
 """
@@ -36,81 +37,37 @@ HERE = Path(__file__).resolve().parent
 MAKE_PARTS = HERE.parent / "tests" / "parts" / "make_parts.py"
 SIZE_FROM_SCALE = 40.0  # fuzzymesh's default global size: bounding-box diagonal / 40
 RUNS = ("default", "static-stress")
-# tetrahedron faces (face k opposite vertex k) and, per edge, the two faces that meet there
-FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-EDGE_FACES = np.array([[2, 3], [1, 3], [1, 2], [0, 3], [0, 2], [0, 1]])
 ENV = {**os.environ, "OMP_WAIT_POLICY": os.environ.get("OMP_WAIT_POLICY", "PASSIVE")}
 
 
 # ----------------------------------------------------------------------------------------------- measures
 
 
-def tet_measures(points: np.ndarray, tets: np.ndarray) -> dict:
-    """Count, minimum dihedral angle (degrees; 0 for a degenerate tet), volume (|sum of signed volumes|)
-    and the number of tets whose sign differs from the total's."""
-    p = points[tets]
-    signed = np.einsum("mi,mi->m", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6
-    a, b, c = (p[:, FACES[:, k]] for k in range(3))
-    normals = np.cross(b - a, c - a)
-    away = np.sign(np.einsum("mfi,mfi->mf", normals, a - p))  # orient face k away from vertex k
-    with np.errstate(invalid="ignore", divide="ignore"):
-        normals *= (away / np.linalg.norm(normals, axis=2))[..., None]
-        cosine = -np.einsum("mei,mei->me", normals[:, EDGE_FACES[:, 0]], normals[:, EDGE_FACES[:, 1]])
-    dihedral = np.degrees(np.arccos(np.clip(np.nan_to_num(cosine, nan=1.0), -1, 1))).min(axis=1)
+def measure(points, tets, stl, cad_volume: float, size: float) -> dict:
+    """All figures of a tet mesh against its STL (a trimesh) and CAD volume, by the engine's own measures
+    (the ones the acceptance gate uses): tets, min dihedral, volume (|sum of signed volumes|) and the tets
+    whose sign differs from the total's, volume errors, and the two-sided Hausdorff distance between the
+    tets' boundary and the STL (``quality.surface_distances``, seeded samples)."""
+    from engine.acceptance import boundary_topology
+    from engine.mesh import signed_volumes
+    from engine.quality import surface_distances, tet_quality
+
+    tets = np.asarray(tets, dtype=np.int64)
+    signed = signed_volumes(points, tets)
     total = signed.sum()
-    return {
+    oriented = tets if total >= 0 else tets[:, [0, 2, 1, 3]]  # Gmsh's may run the other way
+    distances = surface_distances(points, boundary_topology(oriented)["faces"], stl, lambda x: size, 20000)
+    hausdorff = max(distances["input_to_mesh"]["max"], distances["mesh_to_input"]["max"])
+    figures = {
         "tets": len(tets),
-        "min_dihedral": float(dihedral.min()),
+        "min_dihedral": float(tet_quality(points, oriented).min_dihedral.min()),
         "volume": float(abs(total)),
         "inverted": int((np.sign(signed) != np.sign(total)).sum()),
+        "hausdorff": float(hausdorff),
+        "hausdorff_over_h": float(hausdorff / size),
     }
-
-
-def boundary_triangles(tets: np.ndarray) -> np.ndarray:
-    """The faces of ``tets`` that belong to one tet only."""
-    faces = tets[:, FACES].reshape(-1, 3)
-    _, first, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
-    return faces[first[counts == 1]]
-
-
-def _samples(vertices, triangles, count, rng) -> np.ndarray:
-    """The vertices and ``count`` area-weighted random points of a triangle surface."""
-    corners = vertices[triangles]
-    area = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    pick = rng.choice(len(triangles), count, p=area / area.sum())
-    u, v = rng.random((2, count))
-    flip = u + v > 1
-    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
-    c = corners[pick]
-    return np.vstack(
-        [vertices[np.unique(triangles)], c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])]
-    )
-
-
-def hausdorff(points, triangles, stl_vertices, stl_triangles, count: int = 20000) -> float:
-    """Two-sided Hausdorff distance between two triangle surfaces, from their vertices and ``count``
-    random points on each (seeded: the same value every run)."""
-    import igl
-
-    rng = np.random.default_rng(0)
-    one = igl.point_mesh_squared_distance(
-        _samples(points, triangles, count, rng), stl_vertices, stl_triangles.astype(np.int64)
-    )[0]
-    two = igl.point_mesh_squared_distance(
-        _samples(stl_vertices, stl_triangles, count, rng), points, triangles.astype(np.int64)
-    )[0]
-    return float(np.sqrt(max(one.max(), two.max())))
-
-
-def measure(points, tets, stl, cad_volume: float, size: float) -> dict:
-    """All figures of a tet mesh against its STL (a trimesh) and CAD volume."""
-    figures = tet_measures(points, tets)
-    figures["volume_error_stl"] = figures["volume"] / stl.volume - 1
-    figures["volume_error_cad"] = figures["volume"] / cad_volume - 1
-    figures["hausdorff"] = hausdorff(
-        points, boundary_triangles(tets), np.asarray(stl.vertices, dtype=float), np.asarray(stl.faces)
-    )
-    figures["hausdorff_over_h"] = figures["hausdorff"] / size
+    figures["volume_error_stl"] = float(figures["volume"] / stl.volume - 1)
+    figures["volume_error_cad"] = float(figures["volume"] / cad_volume - 1)
     return figures
 
 
