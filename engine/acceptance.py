@@ -40,6 +40,7 @@ class Tolerances:
     volume: float = 0.02  # |V_mesh / V_input - 1|
     hausdorff: float = 0.25  # x the target size h, each direction
     quadratic_jacobian: float = QUADRATIC_FLOOR  # min scaled Jacobian of a 10-node tet
+    hex_jacobian: float = 0.2  # min scaled corner Jacobian of a hexahedron, prism or pyramid (hex-dominant)
 
 
 def boundary_topology(tets: np.ndarray) -> dict:
@@ -217,3 +218,85 @@ def _locate(point: np.ndarray, geometry, features) -> str:
     digits = max(3, int(np.ceil(np.log10(scale / (1e-4 * geometry.scale)))) if scale > 0 else 3)
     coordinates = ", ".join(f"{c:.{digits}g}" for c in point)
     return f"({coordinates}) near {describe(patch)}"
+
+
+def mixed_faces(mixed) -> tuple[np.ndarray, np.ndarray]:
+    """(faces (f, 4) outward, -1 as the 4th node of a triangle; owner type (f,)) of every cell of a hex-dominant
+    mesh (engine/recombine.py ``MixedMesh``)."""
+    from .recombine import CELL_FACES
+
+    faces, kinds = [], []
+    for kind, cells in enumerate(mixed.cells):
+        for face in CELL_FACES[kind]:
+            f = np.where(face >= 0, cells[:, np.maximum(face, 0)], -1)
+            faces.append(f)
+            kinds.append(np.full(len(f), kind))
+    return np.concatenate(faces).reshape(-1, 4), np.concatenate(kinds)
+
+
+def check_mixed(mixed, tet_volume: float, geometry, features, tolerances: Tolerances) -> dict:
+    """The hex-dominant mesh's gate, after :func:`check_mesh` passed its tets: every cell's corner Jacobians
+    positive and, for hexahedra, prisms and pyramids, its scaled Jacobian at least ``hex_jacobian``; conforming
+    (every face of at most two cells, no triangle on a quad face: no hanging faces); the boundary (its quads split
+    along a diagonal) a closed two-manifold; the volume the tets' to 1e-9. Returns the boundary's figures."""
+    from .recombine import CELL_TYPES
+
+    def where(point) -> str:
+        return _locate(np.asarray(point, dtype=float), geometry, features)
+
+    for kind, (cells, quality) in enumerate(zip(mixed.cells, mixed.qualities())):
+        floor = tolerances.hex_jacobian if kind < 3 else 0.0
+        if len(quality) and not quality.min() > 0 or len(quality) and not quality.min() >= floor:
+            worst = int(np.argmin(quality))
+            raise MeshRejected(
+                f"a {CELL_TYPES[kind]} has a scaled corner Jacobian of {quality[worst]:.3g} (floor {floor:g}) at "
+                f"{where(mixed.points[cells[worst]].mean(axis=0))}",
+                check="cell validity",
+                fix=f"lower acceptance.hex_jacobian in the sizing defaults, or mesh tetrahedra; {KEEP_INVALID}",
+            )
+    faces, _ = mixed_faces(mixed)
+    key = np.sort(faces, axis=1)  # a triangle's -1 sorts first
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    problem = None
+    if (counts > 2).any():
+        problem = f"{int((counts > 2).sum())} faces shared by more than two cells", faces[counts[inverse] > 2][0]
+    quads = faces[faces[:, 3] >= 0]
+    triangles = faces[faces[:, 3] < 0][:, :3]
+    halves = np.sort(quads[:, [0, 1, 2, 0, 1, 3, 0, 2, 3, 1, 2, 3]].reshape(-1, 3), axis=1)
+    sorted_triangles = np.sort(triangles, axis=1)
+    if problem is None and len(halves) and len(triangles):
+        both = np.vstack([halves, sorted_triangles])
+        _, first = np.unique(both, axis=0, return_inverse=True)
+        first = first.ravel()
+        hanging = np.isin(first[len(halves) :], first[: len(halves)])
+        if hanging.any():
+            problem = f"{int(hanging.sum())} triangles lying on quad faces (hanging)", triangles[hanging][0]
+    if problem is not None:
+        raise MeshRejected(
+            f"the hex-dominant mesh does not conform: {problem[0]}, e.g. at "
+            f"{where(mixed.points[problem[1][problem[1] >= 0]].mean(axis=0))}",
+            check="conforming cells",
+            fix=f"mesh tetrahedra (output.elements) and report the input; {KEEP_INVALID}",
+        )
+    single = faces[counts[inverse] == 1]
+    quad = single[:, 3] >= 0
+    boundary = np.vstack([single[~quad, :3], single[quad][:, [0, 1, 2]], single[quad][:, [0, 2, 3]]])
+    directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    undirected, edge_counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    same_way, way_counts = np.unique(directed, axis=0, return_counts=True)
+    if (edge_counts != 2).any() or (way_counts > 1).any():
+        bad = undirected[edge_counts != 2][:1, 0] if (edge_counts != 2).any() else same_way[way_counts > 1][:1, 0]
+        raise MeshRejected(
+            f"the hex-dominant mesh's boundary is not a closed two-manifold, e.g. at {where(mixed.points[bad[0]])}",
+            check="closed two-manifold boundary",
+            fix=f"mesh tetrahedra (output.elements) and report the input; {KEEP_INVALID}",
+        )
+    volume = sum(float(v.sum()) for v in mixed.volumes())
+    if not abs(volume / tet_volume - 1) <= 1e-9:
+        raise MeshRejected(
+            f"the hex-dominant mesh's volume is {100 * (volume / tet_volume - 1):+.3g} % of its tets'",
+            check="volume",
+            fix=f"mesh tetrahedra (output.elements) and report the input; {KEEP_INVALID}",
+        )
+    return {"boundary_quads": int(quad.sum()), "boundary_triangles": int((~quad).sum()), "volume": volume}

@@ -12,6 +12,9 @@ import numpy as np
 
 from .atomic import Target
 from .fe import TET10_EDGES, row_index, side_cells, tet_boundary
+from .hexdom import write_abaqus as _mixed_abaqus
+from .hexdom import write_gmsh as _mixed_gmsh
+from .hexdom import write_vtu as _mixed_vtu
 from .mesh import TetMesh
 from .plugins import Writer
 from .registry import Registry
@@ -34,6 +37,7 @@ class FEModel:
     cell_data: dict = field(default_factory=dict)  # per element (the audit)
     point_data: dict = field(default_factory=dict)  # per node (the audit; -1 / 0 on mid-edge nodes)
     legend: dict | None = None  # the audit legend, written as <name>.audit.json
+    mixed: object | None = None  # a hex-dominant mesh's cells, data and groups (engine.hexdom.MixedModel)
 
     @staticmethod
     def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
@@ -143,12 +147,16 @@ def _middles(model: FEModel, ends: np.ndarray) -> np.ndarray:
 @WRITERS.register("vtu")
 def write_vtu(path, model: FEModel) -> None:
     """VTU (ParaView): the tetrahedra with node tags and the audit fields."""
+    if model.mixed is not None:
+        return _mixed_vtu(path, model)
     meshio.write(path, to_meshio(model, audit=True), file_format="vtu")
 
 
 @WRITERS.register("msh")
 def write_gmsh(path, model: FEModel) -> None:
     """Gmsh 2.2 binary: tets and every group's cells with their physical groups."""
+    if model.mixed is not None:
+        return _mixed_gmsh(path, model)
     meshio.write(path, to_gmsh(model), file_format="gmsh22", binary=True)
 
 
@@ -162,6 +170,8 @@ def write_med(path, model: FEModel) -> None:
 def write_abaqus(path, model: FEModel) -> None:
     """Abaqus input: C3D4/C3D10 elements, a node set per group, the solid's element set, and an
     element-face surface per surface group (for loads and contact)."""
+    if model.mixed is not None:
+        return _mixed_abaqus(path, model, _abaqus_name)
     data = to_meshio(model)
     data.point_sets = {_abaqus_name(g.name): g.nodes for g in model.groups if g.dim < 3}
     data.cell_sets = {_abaqus_name(g.name): [g.cells] for g in model.groups if g.dim == 3}

@@ -19,6 +19,8 @@ from .shapes import SHAPES
 from .yamlfile import Located, load_yaml, located
 
 OUTPUT_FORMATS = ("vtu", "msh", "inp", "bdf", "med")
+ELEMENTS = ("tetrahedra", "hex-dominant")
+HEX_DOMINANT_FORMATS = ("vtu", "msh", "inp")  # the writers that take hexahedra, prisms and pyramids
 
 
 def _plain_name(value):
@@ -92,6 +94,12 @@ def job_schema() -> dict:
                     choices=(1, 2),
                     doc="element order: 1 (4-node tets) or 2 (10-node tets, boundary on the surface)",
                 ),
+                "elements": Field(
+                    STRING,
+                    default="tetrahedra",
+                    choices=ELEMENTS,
+                    doc="tetrahedra, or hex-dominant (hexahedra, prisms and pyramids recombined from the tets)",
+                ),
             },
         ),
     }
@@ -122,6 +130,7 @@ class Job:
     output_formats: list[str]
     raw: dict
     output_order: int = 1
+    output_elements: str = "tetrahedra"
 
     def where(self, *keys) -> str:
         """file:line:col of a key path in the job file (as deep as it exists)."""
@@ -169,6 +178,18 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
     if values["min_size"] and values["max_size"] and values["min_size"] > values["max_size"]:
         raise JobError("'min_size' is larger than 'max_size'", where=data.where("min_size"), fix="swap or fix them")
     output = values["output"] or validate(Located(), job_schema()["output"].fields, JobError, "output")
+    if output["elements"] == "hex-dominant":
+        other = [f for f in output["formats"] if f not in HEX_DOMINANT_FORMATS]
+        if other or output["order"] != 1:
+            raise JobError(
+                "hex-dominant elements are written as linear cells in "
+                f"{', '.join(HEX_DOMINANT_FORMATS)} only" + (f", not {', '.join(other)}" if other else ", order 1"),
+                where=data.where("output"),
+                fix=f"use formats from {', '.join(HEX_DOMINANT_FORMATS)} and order 1, or elements: tetrahedra",
+            )
+    packer = values["packer"]
+    if output["elements"] == "hex-dominant" and "packer" not in data:
+        packer = "grid"  # nodes on a grid aligned with the solid's frame (engine/packing/grid.py)
     base_dir = Path(base_dir)
     return Job(
         source=source,
@@ -184,7 +205,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         recipe=values["recipe"],
         placements=load_placements(data["place"], data.where("place"), "job", "job/place") if "place" in data else [],
         knowledge=[base_dir / k for k in values["knowledge"]],
-        packer=values["packer"],
+        packer=packer,
         mesher=values["mesher"],
         seed=values["seed"],
         output_dir=base_dir / output["directory"],
@@ -192,6 +213,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         output_formats=list(dict.fromkeys(output["formats"])),
         raw=data,
         output_order=output["order"],
+        output_elements=output["elements"],
     )
 
 

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .acceptance import check_mesh
+from .acceptance import check_mesh, check_mixed
 from .assembly import mesh_assembly
 from .atomic import write_all_or_nothing
 from .audit import Audit, audit_mesh, idle_patterns
@@ -23,6 +23,8 @@ from .exact import ExactSurfaces, on_exact_surfaces
 from .fe import feature_groups, quadratic, tet_bodies
 from .features import Features, apply_names, classify, detect_features
 from .geometry import Geometry, load_surface
+from .hexdom import mixed_model
+from .hexdom import summary as hexdom_summary
 from .io import FEModel, mesh_targets
 from .job import Job
 from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
@@ -31,6 +33,7 @@ from .meshing import get_mesher
 from .packing import Packing, get_packer
 from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
+from .recombine import recombine
 from .report import report_summary, report_targets
 from .shapes import build_shape
 from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
@@ -242,6 +245,41 @@ def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict 
     return Prepared(kb, geometry, features, sizing)
 
 
+def _log_hexdom(figures: dict, seconds: float) -> None:
+    cells = figures["cells"]
+    log.info(
+        "hex-dominant: %s; %.1f %% of the volume in hexahedra; scaled Jacobian min (1st percentile) %s (%.2f s)",
+        ", ".join(f"{c['cells']} {name}" for name, c in cells.items()),
+        100 * figures["hex_volume_share"],
+        ", ".join(
+            f"{name} {c['scaled_jacobian']['min']:.3f} ({c['scaled_jacobian']['p01']:.3f})"
+            for name, c in cells.items()
+            if c["scaled_jacobian"]
+        ),
+        seconds,
+    )
+
+
+def _with_mixed(model: FEModel, mixed) -> FEModel:
+    """The FE model with the hex-dominant cells (engine/hexdom.py): the recombination's centre nodes added (node
+    level and entity -1), the groups and audit fields carried to the cells; the tets stay for the report's view."""
+    from dataclasses import replace
+
+    extra = len(mixed.points) - len(model.points)
+
+    def pad(values):
+        return np.r_[values, np.full(extra, -1 if values.dtype.kind in "iu" else 0, dtype=values.dtype)]
+
+    return replace(
+        model,
+        points=mixed.points,
+        node_level=pad(model.node_level),
+        node_entity=pad(model.node_entity),
+        point_data={k: pad(v) for k, v in model.point_data.items()},
+        mixed=mixed_model(mixed, model.groups, model.cell_data),
+    )
+
+
 def _no_mesh(job: Job, what: str, error: Exception) -> MeshRejected:
     return MeshRejected(
         f"the {job.mesher} mesher made no valid mesh of the {what} of the {job.packer} packer: {error}",
@@ -421,11 +459,19 @@ def run(
         warnings=warnings,
     )
     tolerances = kb.sizing["acceptance"]
+    mixed = None
+    if job.output_elements == "hex-dominant":
+        with stage("recombine", timings):
+            mixed = recombine(mesh.points, mesh.tets, tolerances.hex_jacobian)
+            quality["hex_dominant"] = hexdom_summary(mixed)
+        _log_hexdom(quality["hex_dominant"], timings["recombine"])
     model = (
         fe_model(job, mesh, geometry, features, audit, tolerances.quadratic_jacobian, exact)
         if write or job.output_order == 2
         else None
     )
+    if mixed is not None and model is not None:
+        model = _with_mixed(model, mixed)
     with stage("acceptance", timings):
         try:
             check_mesh(
@@ -437,6 +483,8 @@ def run(
                 tolerances,
                 scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None,
             )
+            if mixed is not None:
+                quality["hex_dominant"]["boundary"] = check_mixed(mixed, mesh.volume, geometry, features, tolerances)
         except MeshRejected:
             if write and keep_invalid:
                 files = write_files(

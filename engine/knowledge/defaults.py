@@ -49,6 +49,12 @@ SIZING_FILE = {
                 check=in_range(0.0, 1.0),
                 doc="smallest scaled Jacobian of a 10-node tetrahedron",
             ),
+            "hex_jacobian": Field(
+                NUMBER,
+                default=Tolerances.hex_jacobian,
+                check=in_range(0.0, 1.0),
+                doc="smallest scaled corner Jacobian of a hexahedron, prism or pyramid of a hex-dominant mesh",
+            ),
         },
     ),
 }

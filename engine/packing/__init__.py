@@ -65,7 +65,9 @@ class Packing:
         )
 
 
-PACKERS = Registry("fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice"], Packer)
+PACKERS = Registry(
+    "fuzzymesh.packers", ["engine.packing.bubble", "engine.packing.lattice", "engine.packing.grid"], Packer
+)
 register_packer = PACKERS.register
 get_packer = PACKERS.get
 packer_names = PACKERS.names
