@@ -104,7 +104,7 @@ def job_placements(job: Job, kb: KnowledgeBase) -> list[Placement]:
     placements += job.placements
     if not placements:
         base = kb.sizing["base_pattern"]
-        placements = [Placement(base, "base", None, None, None, None, {}, {}, None, job.where(), "default")]
+        placements = [Placement(pattern=base, id="base", source=job.where(), origin="default")]
     placed = {p.pattern for p in placements}
     return placements + [p for p in kb.sizing["always_place"] if p.pattern not in placed]
 

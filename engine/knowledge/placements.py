@@ -34,21 +34,22 @@ PLACEMENT = {
 }
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Placement:
-    """A pattern placed by a recipe or a job, before it is bound to features."""
+    """A pattern placed by a recipe or a job, before it is bound to features (a value: derive a changed one
+    with ``dataclasses.replace``)."""
 
     pattern: str
     id: str
-    at: str | None
-    every: str | None
-    point: list | None
-    region: dict | None
-    roles: dict
-    parameters: dict
-    scale: float | None
     source: str
-    origin: str  # "recipe NAME" or "job"
+    origin: str  # "recipe NAME", "job" or "default"
+    at: str | None = None
+    every: str | None = None
+    point: list | None = None
+    region: dict | None = None
+    roles: dict = field(default_factory=dict)
+    parameters: dict = field(default_factory=dict)
+    scale: float | None = None
     key_where: dict = field(default_factory=dict)  # key -> file:line:col
 
     def where(self, key: str | None = None) -> str:
@@ -81,18 +82,18 @@ def load_placements(raw_list, where: str, origin: str, prefix: str) -> list[Plac
                 key_where.update({f"{section}.{k}": body[section].where(k) for k in body[section]})
         placements.append(
             Placement(
-                p["pattern"],
-                p["id"] or f"{prefix}[{index}]",
-                p["at"],
-                p["every"],
-                p["point"],
-                p["region"],
-                dict(p["roles"]),
-                dict(p["parameters"]),
-                p["scale"],
-                body.where(),
-                origin,
-                key_where,
+                pattern=p["pattern"],
+                id=p["id"] or f"{prefix}[{index}]",
+                at=p["at"],
+                every=p["every"],
+                point=p["point"],
+                region=p["region"],
+                roles=dict(p["roles"]),
+                parameters=dict(p["parameters"]),
+                scale=p["scale"],
+                source=body.where(),
+                origin=origin,
+                key_where=key_where,
             )
         )
     return placements
