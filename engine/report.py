@@ -1,7 +1,7 @@
 """The mesh report: ``<name>.report.json`` (figures) and a self-contained ``<name>.report.html``: an interactive
 3-D view of the mesh with the audit of the element under the pointer (plotly.js, inlined), two cuts through the
 most refined region coloured by winning pattern, target size and quality, element quality histograms, the
-size-conformity histogram, stage timings and counts (PNG plots embedded as data URIs). See docs/report.md.
+size-conformity histogram, stage timings and counts (inline SVG plots, engine/plots.py). See docs/report.md.
 
 Everything the HTML shows is rebuilt from the written files (the VTU with its audit fields, the audit
 legend and the report JSON), so ``fuzzymesh report OUT`` regenerates it without meshing again.
@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 import zlib
 from dataclasses import dataclass
@@ -172,13 +171,13 @@ def render_html(
         "<tr>" + "".join(f"<td>{html.escape(str(x))}</td>" for x in row) + "</tr>" for row in patterns
     )
     figures = "".join(
-        f'<h2>{html.escape(title)}</h2><img alt="{html.escape(title)}" src="data:image/png;base64,{png}">'
-        for title, png in plots.items()
+        f'<h2>{html.escape(title)}</h2><figure role="img" aria-label="{html.escape(title)}">{plot}</figure>'
+        for title, plot in plots.items()
     )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>fuzzymesh report</title>
 <style>body{{font-family:sans-serif;margin:2em;max-width:1100px}}table{{border-collapse:collapse;margin:1em 0}}
-th,td{{border:1px solid #ccc;padding:4px 8px;text-align:left}}img{{max-width:100%}}</style></head>
+th,td{{border:1px solid #ccc;padding:4px 8px;text-align:left}}figure{{margin:0}}</style></head>
 <body><h1>fuzzymesh report</h1><table>{table}</table>
 <h2>Which pattern sized the elements</h2>
 <table><tr><th>placed pattern</th><th>pattern</th><th>feature</th><th>placed at</th><th>elements</th></tr>
@@ -233,48 +232,30 @@ def _placed_by(legend: dict, cells: dict, element: int) -> str:
     return f"placed by {p['id']} (pattern '{p['pattern']}'{feature}, zone '{zone['id']}' {zone['source']})"
 
 
-def _png(figure) -> str:
-    import matplotlib.pyplot as plt
-
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=90, bbox_inches="tight")
-    plt.close(figure)
-    return base64.b64encode(buffer.getvalue()).decode("ascii")
-
-
-def _figure(columns: int = 1, width: float = 5.0, height: float = 3.6):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt.subplots(1, columns, figsize=(width * columns, height))
-
-
 def _quality_histograms(quality) -> str:
-    figure, axes = _figure(3)
-    for axis, values, title, mark in (
-        (axes[0], quality.min_dihedral, "minimum dihedral angle (°)", 10.0),
-        (axes[1], quality.max_dihedral, "maximum dihedral angle (°)", 165.0),
-        (axes[2], quality.radius_ratio, "radius ratio 3 r_in / R_circ", 0.1),
-    ):
-        axis.hist(values, bins=60, color="#4477aa")
-        axis.axvline(mark, color="#cc3311", linestyle="--")
-        axis.set_xlabel(title)
-        axis.set_yscale("log")
-    axes[0].set_ylabel("tetrahedra")
-    return _png(figure)
+    from .plots import histograms
+
+    panels = (
+        (quality.min_dihedral, "minimum dihedral angle (°)", 10.0),
+        (quality.max_dihedral, "maximum dihedral angle (°)", 165.0),
+        (quality.radius_ratio, "radius ratio 3 r_in / R_circ", 0.1),
+    )
+    return histograms(panels, "#4477aa", "tetrahedra")
 
 
 def _conformity_histogram(conformity: dict) -> str:
-    figure, axis = _figure(1, 7.0)
+    from .plots import bar_chart
+
     bins, counts = np.asarray(conformity["histogram"]["bins"]), np.asarray(conformity["histogram"]["counts"])
-    axis.bar(bins[:-1], counts, width=np.diff(bins), align="edge", color="#228833")
-    for edge in conformity["band"]:
-        axis.axvline(edge, color="#cc3311", linestyle="--")
-    axis.set_xlabel("edge length / target size at its midpoint")
-    axis.set_ylabel("edges")
-    return _png(figure)
+    return bar_chart(
+        bins[:-1],
+        np.diff(bins),
+        counts,
+        "#228833",
+        "edge length / target size at its midpoint",
+        "edges",
+        marks=conformity["band"],
+    )
 
 
 def cut_polygons(points: np.ndarray, tets: np.ndarray, axis: int, value: float):
@@ -302,50 +283,36 @@ PALETTE = ("#4477aa", "#ee6677", "#228833", "#ccbb44", "#66ccee", "#aa3377", "#b
 def _cut(points, tets, cells, legend, quality, axis: int, value: float, focus: Finest) -> str:
     """The plane x[axis] = value in three panels: winning pattern, target size, element quality; the finest
     element marked with a cross."""
-    from matplotlib.collections import PolyCollection
-    from mpl_toolkits.axes_grid1 import make_axes_locatable
+    from .plots import colourmap, cut_panels
 
     crossing, polygons = cut_polygons(points, tets, axis, value)
     other = [i for i in range(3) if i != axis]
-    extent = np.ptp(points[:, other], axis=0)
-    figure, axes = _figure(3, 5.0, 0.5 + 5.0 * min(max(extent[1] / extent[0], 0.3), 1.5))
-    figure.subplots_adjust(wspace=0.4)
     winners = cells["winner"][crossing]
-    palette = np.array(PALETTE)
-    axes[0].add_collection(
-        PolyCollection(polygons, facecolors=palette[np.mod(winners, len(palette))], edgecolors="k", linewidths=0.1)
-    )
+    palette = np.array([[int(c[i : i + 2], 16) for i in (1, 3, 5)] for c in PALETTE], dtype=np.uint8)
     names = {p["index"]: p["id"] for p in legend["patterns"]}
-    for index in np.unique(winners):
-        axes[0].plot([], [], "s", color=palette[index % len(palette)], label=names.get(int(index), "none"))
-    axes[0].legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
-    axes[0].set_title("winning pattern")
-    for ax, values, title, cmap in (
-        (axes[1], cells["h_target"][crossing], "target size h_target", "viridis"),
-        (axes[2], quality.min_dihedral[crossing], "minimum dihedral angle (°)", "magma"),
+    legend_entries = [(PALETTE[index % len(PALETTE)], names.get(int(index), "none")) for index in np.unique(winners)]
+    panels = [("winning pattern", palette[np.mod(winners, len(PALETTE))], legend_entries, None)]
+    for values, title, cmap in (
+        (cells["h_target"][crossing], "target size h_target", "viridis"),
+        (quality.min_dihedral[crossing], "minimum dihedral angle (°)", "magma"),
     ):
-        collection = PolyCollection(polygons, array=values, cmap=cmap, edgecolors="k", linewidths=0.1)
-        ax.add_collection(collection)
-        bar = make_axes_locatable(ax).append_axes("right", size="4%", pad=0.06)  # as tall as its plot
-        figure.colorbar(collection, cax=bar)
-        ax.set_title(title)
-    for ax in axes:
-        ax.set_xlim(points[:, other[0]].min(), points[:, other[0]].max())
-        ax.set_ylim(points[:, other[1]].min(), points[:, other[1]].max())
-        ax.set_aspect("equal")
-        ax.plot(*focus.point[other], "+", color="#cc3311", markersize=12, markeredgewidth=2)
-        ax.set_xlabel("xyz"[other[0]])
-        ax.set_ylabel("xyz"[other[1]])
-    return _png(figure)
+        low, high = (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
+        colours = colourmap(cmap, (values - low) / (high - low) if high > low else np.zeros(len(values)))
+        panels.append((title, colours, None, (cmap, low, high)))
+    return cut_panels(
+        polygons,
+        (points[:, other[0]].min(), points[:, other[0]].max()),
+        (points[:, other[1]].min(), points[:, other[1]].max()),
+        ("xyz"[other[0]], "xyz"[other[1]]),
+        panels,
+        focus.point[other],
+    )
 
 
 def _timings(timings: dict) -> str:
-    figure, axis = _figure(1, 7.0, 3.0)
-    names = list(timings)
-    axis.barh(names, [timings[n] for n in names], color="#aa3377")
-    axis.invert_yaxis()
-    axis.set_xlabel("seconds")
-    return _png(figure)
+    from .plots import horizontal_bars
+
+    return horizontal_bars(list(timings), [timings[n] for n in timings], "#aa3377", "seconds")
 
 
 def neighbours(tets: np.ndarray) -> np.ndarray:

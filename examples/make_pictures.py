@@ -7,18 +7,19 @@ Each job is ``examples/junction-centre.yaml`` / ``junction-edge.yaml`` with the 
 junction pattern's ``near`` replaced (default: the recipe junction-edge's 0.06 x the radius, twice as
 fine as the examples), meshed into ``examples/out/pictures/NAME/``. The report is then rebuilt with
 its cut in the plane y = 0 (through the cylinder's axis and the ligament to the near plate edge) and
-z = 10 (mid-plate), and those PNGs, taken from the report page and re-encoded with a 256-colour
-palette (about 100 KB instead of 330 KB, so they can be committed), are written as
-``docs/images/NAME-cut-y0.png`` and ``NAME-cut-z10.png``. About 45,000-55,000 tetrahedra per case.
+z = 10 (mid-plate), and those figures, taken from the report page (inline SVG), drawn by headless
+Chromium (Playwright, as tests/test_report.py) and re-encoded with a 256-colour palette (so they can be
+committed), are written as ``docs/images/NAME-cut-y0.png`` and ``NAME-cut-z10.png``. About 45,000-55,000
+tetrahedra per case.
 """
 
 from __future__ import annotations
 
 import argparse
-import base64
 import io
 import logging
 import re
+import shutil
 from pathlib import Path
 
 import yaml
@@ -32,12 +33,23 @@ EXAMPLES = Path(__file__).resolve().parent
 IMAGES = EXAMPLES.parent / "docs" / "images"
 CASES = ("junction-centre", "junction-edge")
 CUTS = {"y0": (1, 0.0), "z10": (2, 10.0)}
-FIGURE = re.compile(r'<h2>([^<]*)</h2><img alt="[^"]*" src="data:image/png;base64,([^"]+)"')
+FIGURE = re.compile(r'<h2>([^<]*)</h2><figure role="img" aria-label="[^"]*">(<svg .*?</svg>)</figure>')
 
 
 def report_pictures(html: str) -> dict[str, bytes]:
-    """Title -> PNG bytes of every figure of a report page."""
-    return {title: base64.b64decode(data) for title, data in FIGURE.findall(html)}
+    """Title -> PNG bytes of every figure of a report page, drawn by headless Chromium."""
+    from playwright.sync_api import sync_playwright
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    pictures = {}
+    with sync_playwright() as driver:
+        browser = driver.chromium.launch(executable_path=chromium, args=["--no-sandbox", "--disable-gpu"])
+        page = browser.new_page()
+        for title, svg in FIGURE.findall(html):
+            page.set_content(f"<body style='margin:0'>{svg}</body>")
+            pictures[title] = page.locator("svg").first.screenshot()
+        browser.close()
+    return pictures
 
 
 def palette_png(png: bytes) -> bytes:

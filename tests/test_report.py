@@ -27,7 +27,8 @@ FLAGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
-IMAGES = r'src="data:image/png;base64,([^"]+)"'
+FIGURES = r'<figure role="img" aria-label="[^"]*">(<svg .*?</svg>)</figure>'  # the plots, inline SVG
+RASTERS = r'href="data:image/png;base64,([^"]+)"'  # a cut panel's elements
 
 
 @pytest.fixture(scope="module")
@@ -71,8 +72,11 @@ def test_report_json_holds_the_run_figures(meshed):
 def test_html_is_self_contained_small_and_regenerated_from_the_saved_files(meshed, capsys):
     out, _ = meshed
     page = page_of(out)
-    images = re.findall(IMAGES, page)
-    assert len(images) == 5 and all(base64.b64decode(i).startswith(b"\x89PNG") for i in images)
+    figures = re.findall(FIGURES, page)
+    assert len(figures) == 5 and all(f.startswith('<svg xmlns="http://www.w3.org/2000/svg"') for f in figures)
+    rasters = [re.findall(RASTERS, f) for f in figures]
+    assert [len(r) for r in rasters] == [0, 0, 3, 3, 0], "a cut: three panels, each its elements as a PNG"
+    assert all(base64.b64decode(r).startswith(b"\x89PNG") for r in rasters[2] + rasters[3])
     assert not re.search(r'\b(src|href)="(?!data:)', page), "no external resources"
     assert "plate-edge-junction" in page and "junction-edge.yaml" in page
     assert len(page.encode()) < 7e6, f"{len(page.encode()):,} bytes"
@@ -102,9 +106,9 @@ def test_the_cuts_go_through_the_finest_element_at_the_junction(meshed):
 def test_the_cut_plane_can_be_chosen(meshed, tmp_path, capsys):
     out, _ = meshed
     folder = shutil.copytree(out, tmp_path / "out")
-    default = re.findall(IMAGES, page_of(folder))
+    default = re.findall(FIGURES, page_of(folder))
     assert main(["report", str(folder), "--cut", "z=10"]) == 0
-    chosen = re.findall(IMAGES, page_of(folder))
+    chosen = re.findall(FIGURES, page_of(folder))
     assert len(chosen) == 4 and chosen[2] not in default[2:4], "one cut, the chosen one"
     assert chosen[:2] == default[:2] and chosen[3] == default[4], "the other plots do not change"
     assert "Cut at z = 10" in page_of(folder)
