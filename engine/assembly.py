@@ -209,17 +209,16 @@ def _impose(packing, geometry, features, keys, curve_edges, imposed, merged):
     )
     kept = np.flatnonzero(~drop)
     given = Packing(
-        packing.points[kept],
-        packing.level[kept],
-        packing.entity[kept],
-        packing.radius[kept],
-        packing.stats,
-        packing.ids[kept] if packing.ids is not None else None,
-        packing.events,
+        points=packing.points[kept],
+        level=packing.level[kept],
+        entity=packing.entity[kept],
+        radius=packing.radius[kept],
+        stats=packing.stats,
+        ids=packing.ids[kept] if packing.ids is not None else None,
+        events=packing.events,
     )
-    interface = Packing(x, level, entity, _radius(packing, x), ids=np.full(len(x), -1))
-    out = Packing.concatenate([given, interface], packing.stats)
-    out.events = packing.events
+    interface = Packing(points=x, level=level, entity=entity, radius=_radius(packing, x), ids=np.full(len(x), -1))
+    out = Packing.concatenate([given, interface], packing.stats, events=packing.events)
     local = np.full(int(held.max()) + 1, -1, np.int64)
     local[held] = len(kept) + np.arange(len(held))
     triangles = np.concatenate([local[t][:, ::-1] for _, t in imposed])
@@ -251,13 +250,19 @@ def _packing(packings: list) -> Packing:
         ids = packing.ids if packing.ids is not None else np.full(len(packing), -1)
         parts.append(
             Packing(
-                packing.points, packing.level, packing.entity, packing.radius, ids=np.where(ids >= 0, ids + offset, -1)
+                points=packing.points,
+                level=packing.level,
+                entity=packing.entity,
+                radius=packing.radius,
+                ids=np.where(ids >= 0, ids + offset, -1),
             )
         )
         moved = packing.events.copy()
         moved.bubble = moved.bubble + offset
         events.append(moved)
         offset += int(ids.max()) + 1 if len(ids) else 0
-    out = Packing.concatenate(parts, {"bodies": [p.stats for p in packings]})
-    out.events = np.concatenate(events).view(np.recarray) if events else out.events
-    return out
+    return Packing.concatenate(
+        parts,
+        {"bodies": [p.stats for p in packings]},
+        events=np.concatenate(events).view(np.recarray) if events else None,
+    )

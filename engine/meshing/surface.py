@@ -142,10 +142,10 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             next_node += len(new_points)
             added.append(
                 Packing(
-                    new_points,
-                    np.full(len(new_points), PATCH, np.int8),
-                    np.full(len(new_points), p),
-                    new_radius,
+                    points=new_points,
+                    level=np.full(len(new_points), PATCH, np.int8),
+                    entity=np.full(len(new_points), p),
+                    radius=new_radius,
                     ids=np.full(len(new_points), NO_BUBBLE),
                 )
             )
@@ -239,10 +239,10 @@ def _split_chain_edges(nodes, features, chains, pairs):
         radius.append(nodes.radius[ends[hit]].mean(axis=1))
     count = sum(map(len, entity))
     added = Packing(
-        np.vstack(points),
-        np.full(count, CURVE, np.int8),
-        np.concatenate(entity).astype(np.int64),
-        np.concatenate(radius),
+        points=np.vstack(points),
+        level=np.full(count, CURVE, np.int8),
+        entity=np.concatenate(entity).astype(np.int64),
+        radius=np.concatenate(radius),
         ids=np.full(count, NO_BUBBLE),
     )
     return Packing.concatenate([nodes, added], nodes.stats)

@@ -34,9 +34,10 @@ def no_events() -> np.recarray:
     return np.zeros(0, EVENT).view(np.recarray)
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Packing:
-    """Nodes with where they live: level (corner/curve/patch/volume) and entity index."""
+    """Nodes with where they live: level (corner/curve/patch/volume) and entity index. A value: a stage derives
+    a changed one with ``dataclasses.replace``."""
 
     points: np.ndarray  # (n, 3)
     level: np.ndarray  # (n,) int8, index into LEVELS
@@ -50,18 +51,21 @@ class Packing:
         return len(self.points)
 
     @staticmethod
-    def concatenate(parts: list["Packing"], stats: dict | None = None) -> "Packing":
+    def concatenate(parts: list["Packing"], stats: dict | None = None, events: np.recarray | None = None) -> "Packing":
+        """The parts one after the other, with ``stats``, and ``events`` (default: the parts' events in turn)."""
         ids = None
         if any(p.ids is not None for p in parts):  # parts without ids get -1
             ids = np.concatenate([p.ids if p.ids is not None else np.full(len(p), -1) for p in parts]).astype(np.int64)
+        if events is None:
+            events = np.concatenate([no_events()] + [p.events for p in parts]).view(np.recarray)
         return Packing(
-            np.concatenate([p.points for p in parts]).reshape(-1, 3),
-            np.concatenate([p.level for p in parts]).astype(np.int8),
-            np.concatenate([p.entity for p in parts]).astype(np.int64),
-            np.concatenate([p.radius for p in parts]),
-            stats or {},
-            ids,
-            np.concatenate([no_events()] + [p.events for p in parts]).view(np.recarray),
+            points=np.concatenate([p.points for p in parts]).reshape(-1, 3),
+            level=np.concatenate([p.level for p in parts]).astype(np.int8),
+            entity=np.concatenate([p.entity for p in parts]).astype(np.int64),
+            radius=np.concatenate([p.radius for p in parts]),
+            stats=stats or {},
+            ids=ids,
+            events=events,
         )
 
 

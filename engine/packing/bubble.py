@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -140,7 +140,15 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
         )
         steps = _relax(state, constraints[level], geometry, bubbles, control, rng, events, counters)
         points = state.x
-        parts.append(Packing(points, np.full(len(points), level), state.entity, sizing(points) / 2, ids=state.ids))
+        parts.append(
+            Packing(
+                points=points,
+                level=np.full(len(points), level),
+                entity=state.entity,
+                radius=sizing(points) / 2,
+                ids=state.ids,
+            )
+        )
         timings[LEVELS[level]] = time.perf_counter() - start
         log.info(
             "packing %s: %d bubbles (started with %d) in %d steps, %.2f s",
@@ -150,17 +158,15 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
             steps,
             timings[LEVELS[level]],
         )
-    packing = Packing.concatenate(parts)
-    packing.events = np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray)
-    packing.stats = _statistics(
-        packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings, packing.events
+    packing = Packing.concatenate(parts, events=np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray))
+    return replace(
+        packing,
+        stats=_statistics(packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings, packing.events),
     )
-    return packing
 
 
 def _with_ids(packing: Packing, counters) -> Packing:
-    packing.ids = _new_ids(len(packing), counters)
-    return packing
+    return replace(packing, ids=_new_ids(len(packing), counters))
 
 
 def _new_ids(count: int, counters) -> np.ndarray:

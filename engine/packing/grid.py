@@ -19,6 +19,8 @@ the recombination leaves tetrahedra and pyramids there.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -129,13 +131,13 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         points.append(on @ frame)
         entity.append(np.full(len(on), index))
     curved = curve_nodes(_Only(features, [i for i, k in straight.items() if k is None]), sizing, parts[0].points)
+    straight_points = np.concatenate(points).reshape(-1, 3) if points else np.zeros((0, 3))
     straight_nodes = Packing(
-        np.concatenate(points).reshape(-1, 3) if points else np.zeros((0, 3)),
-        np.full(sum(map(len, points)), CURVE, np.int8),
-        np.concatenate(entity).astype(np.int64) if entity else np.zeros(0, np.int64),
-        np.zeros(sum(map(len, points))),
+        points=straight_points,
+        level=np.full(len(straight_points), CURVE, np.int8),
+        entity=np.concatenate(entity).astype(np.int64) if entity else np.zeros(0, np.int64),
+        radius=sizing(straight_points) / 2 if len(straight_points) else np.zeros(0),
     )
-    straight_nodes.radius = sizing(straight_nodes.points) / 2 if len(straight_nodes) else straight_nodes.radius
     parts += [curved, straight_nodes]
     boundary = Packing.concatenate(parts)
     # planar patches at right angles to an axis: the grid's rows projected onto them
@@ -164,7 +166,14 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         gap, _ = cKDTree(boundary.points).query(projected)
         keep = gap > CURVE_EXCLUSION * sizing(projected)
         projected, owner = projected[keep], owner[keep]
-    parts.append(Packing(projected, np.full(len(projected), PATCH, np.int8), owner, sizing(projected) / 2))
+    parts.append(
+        Packing(
+            points=projected,
+            level=np.full(len(projected), PATCH, np.int8),
+            entity=owner,
+            radius=sizing(projected) / 2,
+        )
+    )
     boundary = Packing.concatenate(parts)
     parts.append(_random_patch_nodes(geometry, features, sizing, boundary, rng, ~aligned[features.face_patch]))
     boundary = Packing.concatenate(parts)
@@ -181,15 +190,19 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     h = sizing(world)
     keep = thin(world, 0.7 * h, rng)  # only where octree levels meet: a level's own spacing is >= 0.79 h
     world, h = world[keep], h[keep]
-    parts.append(Packing(world, np.full(len(world), VOLUME, np.int8), np.full(len(world), -1), h / 2))
+    parts.append(
+        Packing(points=world, level=np.full(len(world), VOLUME, np.int8), entity=np.full(len(world), -1), radius=h / 2)
+    )
     packing = Packing.concatenate(parts)
-    packing.stats = {
-        "nodes": len(packing),
-        **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
-        "aligned_patches": int(aligned.sum()),
-        "frame": np.round(frame, 6).tolist(),
-    }
-    return packing
+    return replace(
+        packing,
+        stats={
+            "nodes": len(packing),
+            **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
+            "aligned_patches": int(aligned.sum()),
+            "frame": np.round(frame, 6).tolist(),
+        },
+    )
 
 
 class _Only:
@@ -208,7 +221,9 @@ def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, face
     """The start's patch nodes (:func:`engine.packing.start.patch_nodes`) on the faces of ``faces_mask`` only."""
     mesh = geometry.mesh
     if not faces_mask.any():
-        return Packing(np.zeros((0, 3)), np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0))
+        return Packing(
+            points=np.zeros((0, 3)), level=np.zeros(0, np.int8), entity=np.zeros(0, np.int64), radius=np.zeros(0)
+        )
     leaves, owner = _subdivide(mesh.triangles[faces_mask], sizing)
     owner = np.flatnonzero(faces_mask)[owner]
     area = 0.5 * np.linalg.norm(np.cross(leaves[:, 1] - leaves[:, 0], leaves[:, 2] - leaves[:, 0]), axis=1)
@@ -226,5 +241,8 @@ def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, face
     keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
     keep = keep[len(boundary) :]
     return Packing(
-        candidates[keep], np.full(int(keep.sum()), PATCH, np.int8), patch[keep], h[len(boundary) :][keep] / 2
+        points=candidates[keep],
+        level=np.full(int(keep.sum()), PATCH, np.int8),
+        entity=patch[keep],
+        radius=h[len(boundary) :][keep] / 2,
     )

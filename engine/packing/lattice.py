@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from . import LEVELS, Packing, register_packer
@@ -19,8 +21,10 @@ def pack_lattice(geometry, features, sizing, *, seed: int = 0, knowledge=None) -
     boundary = Packing.concatenate(parts)
     parts.append(volume_nodes(geometry, sizing, boundary, rng))
     packing = Packing.concatenate(parts)
-    packing.stats = {
-        "nodes": len(packing),
-        **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
-    }
-    return packing
+    return replace(
+        packing,
+        stats={
+            "nodes": len(packing),
+            **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
+        },
+    )

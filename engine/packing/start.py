@@ -20,7 +20,9 @@ CANDIDATES_PER_H2 = 8.0  # surface candidates per h^2 of area before thinning
 
 def corner_nodes(features, sizing) -> Packing:
     points = np.array([c.point for c in features.corners]).reshape(-1, 3)
-    return Packing(points, np.full(len(points), CORNER), np.arange(len(points)), sizing(points) / 2)
+    return Packing(
+        points=points, level=np.full(len(points), CORNER), entity=np.arange(len(points)), radius=sizing(points) / 2
+    )
 
 
 def curve_nodes(features, sizing, existing) -> Packing:
@@ -47,7 +49,7 @@ def curve_nodes(features, sizing, existing) -> Packing:
     if len(existing) and len(points):  # a loop that starts at a corner repeats it
         gap, _ = cKDTree(existing).query(points)
         points, entity = points[gap > 1e-9 * sizing.h_min], entity[gap > 1e-9 * sizing.h_min]
-    return Packing(points, np.full(len(points), CURVE), entity, sizing(points) / 2)
+    return Packing(points=points, level=np.full(len(points), CURVE), entity=entity, radius=sizing(points) / 2)
 
 
 def _subdivide(triangles: np.ndarray, sizing, max_levels: int = 64):
@@ -96,7 +98,9 @@ def patch_nodes(geometry, features, sizing, boundary: Packing, rng) -> Packing:
     keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
     keep = keep[len(boundary) :]
     points = candidates[keep]
-    return Packing(points, np.full(len(points), PATCH), patch[keep], h[len(boundary) :][keep] / 2)
+    return Packing(
+        points=points, level=np.full(len(points), PATCH), entity=patch[keep], radius=h[len(boundary) :][keep] / 2
+    )
 
 
 def _octree_lattice(geometry, sizing, rng, density: float | None = None) -> np.ndarray:
@@ -131,4 +135,6 @@ def volume_nodes(geometry, sizing, boundary: Packing, rng, density: float | None
         candidates, h = candidates[gap >= VOLUME_EXCLUSION * h], h[gap >= VOLUME_EXCLUSION * h]
     keep = thin(candidates, VOLUME_EXCLUSION * h, rng)
     points = candidates[keep]
-    return Packing(points, np.full(len(points), VOLUME), np.full(len(points), -1), h[keep] / 2)
+    return Packing(
+        points=points, level=np.full(len(points), VOLUME), entity=np.full(len(points), -1), radius=h[keep] / 2
+    )
