@@ -56,11 +56,36 @@ REBUILD_EVERY = 50  # ... or after this many steps
 INSIDE_CHECK_EVERY = 5  # volume bubbles outside the solid go back to their last checked place
 
 
-@dataclass
+@dataclass(kw_only=True)
+class PackingRun:
+    """What the levels of one packing share and add to: the solid, the bubble diameters (c h), the population
+    rules in force, the seeded generator, the population-control events (EVENT blocks, one per round and
+    action), the next bubble id, and per level its start count, its starting places and its time."""
+
+    geometry: object
+    bubbles: "_Scaled"
+    control: "PopulationControl"
+    rng: np.random.Generator
+    events: list = field(default_factory=list)
+    next_id: int = 0
+    initial_counts: dict = field(default_factory=dict)
+    starts: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+
+    def new_ids(self, count: int) -> np.ndarray:
+        ids = np.arange(self.next_id, self.next_id + count)
+        self.next_id += count
+        return ids
+
+
+@dataclass(kw_only=True)
 class LevelState:
-    """The bubbles of one level while it packs, and the frozen bubbles they push against."""
+    """The bubbles of one level while it packs, the frozen bubbles they push against, the level's constraint
+    and the packing's shared run: the one object :func:`_relax` and :func:`_control` work on."""
 
     level: int
+    constraint: object
+    run: PackingRun
     x: np.ndarray
     entity: np.ndarray
     ids: np.ndarray
@@ -116,29 +141,37 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
     """Pack bubbles level by level; ``initial_density`` scales the starting count (for tests of the rules)."""
     from ..knowledge import load_knowledge
 
-    rng = np.random.default_rng(seed)
     control = PopulationControl(knowledge or load_knowledge())
-    bubbles = _Scaled(sizing, control.settings["diameter"])  # bubble diameters d = c h
-    events: list[np.ndarray] = []  # EVENT rows, a block per control round
-    timings, counters = {}, {"next_id": 0}
+    run = PackingRun(
+        geometry=geometry,
+        bubbles=_Scaled(sizing, control.settings["diameter"]),  # bubble diameters d = c h
+        control=control,
+        rng=np.random.default_rng(seed),
+    )
     corners = corner_nodes(features, sizing)
-    parts = [_with_ids(corners, counters)]
+    parts = [replace(corners, ids=run.new_ids(len(corners)))]
+    run.starts.append(corners.points)
     constraints = {
         CURVE: CurveConstraint(features),
         PATCH: PatchConstraint(geometry, features),
         VOLUME: VolumeConstraint(geometry),
     }
-    initial_counts, starts = {}, [corners.points]
     for level in (CURVE, PATCH, VOLUME):
         start = time.perf_counter()
         frozen = Packing.concatenate(parts)
-        start_nodes = _initial(level, geometry, features, bubbles, frozen, rng, initial_density)
-        initial_counts[LEVELS[level]] = len(start_nodes)
-        starts.append(start_nodes.points)
+        start_nodes = _initial(level, geometry, features, run.bubbles, frozen, run.rng, initial_density)
+        run.initial_counts[LEVELS[level]] = len(start_nodes)
+        run.starts.append(start_nodes.points)
         state = LevelState(
-            level, start_nodes.points, start_nodes.entity, _new_ids(len(start_nodes), counters), frozen.points
+            level=level,
+            constraint=constraints[level],
+            run=run,
+            x=start_nodes.points,
+            entity=start_nodes.entity,
+            ids=run.new_ids(len(start_nodes)),
+            frozen=frozen.points,
         )
-        steps = _relax(state, constraints[level], geometry, bubbles, control, rng, events, counters)
+        steps = _relax(state)
         points = state.x
         parts.append(
             Packing(
@@ -149,30 +182,17 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
                 ids=state.ids,
             )
         )
-        timings[LEVELS[level]] = time.perf_counter() - start
+        run.timings[LEVELS[level]] = time.perf_counter() - start
         log.info(
             "packing %s: %d bubbles (started with %d) in %d steps, %.2f s",
             LEVELS[level],
             len(points),
-            initial_counts[LEVELS[level]],
+            run.initial_counts[LEVELS[level]],
             steps,
-            timings[LEVELS[level]],
+            run.timings[LEVELS[level]],
         )
-    packing = Packing.concatenate(parts, events=np.concatenate([np.zeros(0, EVENT)] + events).view(np.recarray))
-    return replace(
-        packing,
-        stats=_statistics(packing, sizing, bubbles, initial_counts, np.concatenate(starts), timings, packing.events),
-    )
-
-
-def _with_ids(packing: Packing, counters) -> Packing:
-    return replace(packing, ids=_new_ids(len(packing), counters))
-
-
-def _new_ids(count: int, counters) -> np.ndarray:
-    ids = np.arange(counters["next_id"], counters["next_id"] + count)
-    counters["next_id"] += count
-    return ids
+    packing = Packing.concatenate(parts, events=np.concatenate([np.zeros(0, EVENT)] + run.events).view(np.recarray))
+    return replace(packing, stats=_statistics(packing, sizing, run))
 
 
 def _initial(level, geometry, features, bubbles, frozen, rng, density):
@@ -198,9 +218,10 @@ class _Scaled:
         return self.sizing(points) * self.factor
 
 
-def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events, counters) -> int:
+def _relax(state: LevelState) -> int:
     """Integrate the level's bubbles to equilibrium with population control; return the step count."""
-    settings = control.settings
+    constraint, geometry, sizing = state.constraint, state.run.geometry, state.run.bubbles
+    settings = state.run.control.settings
     interval, rounds = settings["control_interval"], settings["control_rounds"]
     damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
     k = NEIGHBOURS[state.level]
@@ -257,7 +278,7 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
                 checked = state.x.copy()
             changed = False
             if step % interval == 0 and step // interval <= rounds:
-                keep = _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours)
+                keep = _control(state, step, neighbours)
                 changed = keep is not None
                 if changed:
                     everything = np.concatenate([state.x, state.frozen])
@@ -276,12 +297,14 @@ def _relax(state: LevelState, constraint, geometry, sizing, control, rng, events
     return step
 
 
-def _control(state, constraint, geometry, sizing, control, rng, events, counters, step, neighbours):
-    """One round of fuzzy population control: the survivor mask of the old bubbles (new ones are
-    appended after the survivors), or None if nothing changed."""
+def _control(state: LevelState, step: int, neighbours: np.ndarray):
+    """One round of fuzzy population control at ``step``: the survivor mask of the old bubbles (new ones are
+    appended after the survivors), or None if nothing changed; the events go to the run."""
+    run = state.run
+    control, rng = run.control, run.rng
     n = len(state.x)
     everything = np.concatenate([state.x, state.frozen])
-    h = sizing(everything)
+    h = run.bubbles(everything)
     settings = control.settings
     overlap, count = proximity(everything, h, neighbours, n, settings["count_radius"])
     level_name = LEVELS[state.level]
@@ -298,13 +321,13 @@ def _control(state, constraint, geometry, sizing, control, rng, events, counters
     new_x = np.zeros((0, 3))
     sources = np.flatnonzero(act_i)
     if len(sources):
-        new_x, sources = _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng)
+        new_x, sources = _insertion_spots(state, everything, h, neighbours, sources)
     deleted = np.flatnonzero(delete)
-    new_ids = _new_ids(len(new_x), counters)
-    events.append(
+    new_ids = run.new_ids(len(new_x))
+    run.events.append(
         _events(state.ids[deleted], level_name, step, "delete", control.delete, rule[deleted], firing[deleted])
     )
-    events.append(_events(new_ids, level_name, step, "insert", control.insert, rule_i[sources], firing_i[sources]))
+    run.events.append(_events(new_ids, level_name, step, "insert", control.insert, rule_i[sources], firing_i[sources]))
     if not delete.any() and not len(new_x):
         return None
     keep = ~delete
@@ -325,8 +348,9 @@ def _events(bubbles, level_name, step, action, rule_base, rules, firing) -> np.n
     return rows
 
 
-def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sources, rng):
+def _insertion_spots(state: LevelState, everything, h, neighbours, sources):
     """A new bubble at distance h on the open side of each source bubble; spots too close to others dropped."""
+    constraint, geometry, rng = state.constraint, state.run.geometry, state.run.rng
     x = everything[sources]
     rows = neighbours[sources]
     valid = rows >= 0
@@ -355,22 +379,23 @@ def _insertion_spots(state, constraint, geometry, everything, h, neighbours, sou
     return spots, sources
 
 
-def _statistics(packing, sizing, bubbles, initial_counts, initial_points, timings, events) -> dict:
-    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 (r0 from the bubble
-    diameters ``bubbles``) of the packing and of its starting places (each level's start beside the settled
-    lower levels), events, timings."""
+def _statistics(packing: Packing, sizing, run: PackingRun) -> dict:
+    """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 (r0 from the run's bubble
+    diameters) of the packing and of its starting places (each level's start beside the settled lower levels),
+    events, timings."""
     expected_nodes, _ = sizing.expected_counts
+    bubbles, initial_points, events = run.bubbles, np.concatenate(run.starts), packing.events
     return {
         "nodes": len(packing),
         "expected_nodes": expected_nodes,
         **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
-        "initial": initial_counts,
+        "initial": run.initial_counts,
         "diameter": bubbles.factor,
         "nearest_over_r0": nearest_over_r0(packing.points, bubbles(packing.points)),
         "initial_nearest_over_r0": nearest_over_r0(initial_points, bubbles(initial_points)),
         "deleted": int(np.count_nonzero(events.action == "delete")),
         "inserted": int(np.count_nonzero(events.action == "insert")),
-        "seconds": timings,
+        "seconds": run.timings,
     }
 
 
