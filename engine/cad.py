@@ -221,23 +221,26 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         kept = cad.kept(vertices, triangles, face, outer)
         geometry.face_body = np.array([face_solids[k][0] for k in kept], np.int64)
         pairs = sorted({face_solids[k] for k in shared})
-        features.assembly = Assembly(
-            solid_names,
-            [(g, f) for g, f, _, _ in bodies],
-            [pf for _, _, pf, _ in bodies],
-            [ce for _, _, _, ce in bodies],
-            patch_faces,
-            curve_edges,
-            [
-                Interface(
-                    f"interface-{solid_names[a]}-{solid_names[b]}",
-                    (a, b),
-                    tuple(int(faces[k]) for k in shared if face_solids[k] == (a, b)),
-                )
-                for a, b in pairs
-            ],
-            frozenset(int(faces[k]) for k in shared),
-            volumes,
+        features = dataclasses.replace(
+            features,
+            assembly=Assembly(
+                solid_names,
+                [(g, f) for g, f, _, _ in bodies],
+                [pf for _, _, pf, _ in bodies],
+                [ce for _, _, _, ce in bodies],
+                patch_faces,
+                curve_edges,
+                [
+                    Interface(
+                        f"interface-{solid_names[a]}-{solid_names[b]}",
+                        (a, b),
+                        tuple(int(faces[k]) for k in shared if face_solids[k] == (a, b)),
+                    )
+                    for a, b in pairs
+                ],
+                frozenset(int(faces[k]) for k in shared),
+                volumes,
+            ),
         )
     return geometry, features
 
@@ -285,13 +288,21 @@ class _CadFaces:
             geometry, self.feature_angle, [lambda _, g=g: group == g for g in range(1, group.max() + 1)]
         )
         patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
-        for patch, members in zip(features.patches, patch_faces):
-            patch.names = [self.face_names[k] for k in members]
-            patch.surface = self.surfaces[members[0]].kind
-            _face_kinds(patch, self.surfaces[members[0]], geometry)
+        patches = [
+            _face_kinds(
+                dataclasses.replace(
+                    patch, names=[self.face_names[k] for k in members], surface=self.surfaces[members[0]].kind
+                ),
+                self.surfaces[members[0]],
+                geometry,
+            )
+            for patch, members in zip(features.patches, patch_faces)
+        ]
         curve_edges = _curve_edges(features, geometry, face, edge_faces, model, edges)
-        for curve, members in zip(features.curves, curve_edges):
-            curve.names = [self.edge_names[k] for k in members]
+        curves = [
+            dataclasses.replace(curve, names=[self.edge_names[k] for k in members])
+            for curve, members in zip(features.curves, curve_edges)
+        ]
         exact_patches = [
             self.surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces
         ]
@@ -301,7 +312,7 @@ class _CadFaces:
             else CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
             for curve, m in zip(features.curves, curve_edges)
         ]
-        features.exact = (exact_patches, exact_curves)
+        features = dataclasses.replace(features, patches=patches, curves=curves, exact=(exact_patches, exact_curves))
         return (
             geometry,
             features,
@@ -522,27 +533,32 @@ def _canonical(surface: Surface) -> np.ndarray:
     return p
 
 
-def _face_kinds(patch, surface: Surface, geometry: Geometry) -> None:
-    """A patch's CAD-given shape: a cylinder's exact axis and radius, a concave torus's fillet kind and tube
-    circle, a narrow cone's chamfer or countersink kind."""
+def _face_kinds(patch, surface: Surface, geometry: Geometry):
+    """The patch with its CAD-given shape: a cylinder's exact axis and radius, a concave torus's fillet kind and
+    tube circle, a narrow cone's chamfer or countersink kind."""
     exact = surface.exact
     normals = geometry.mesh.face_normals[patch.faces]
     centres = geometry.mesh.triangles_center[patch.faces]
     if surface.kind == "Cylinder" and patch.cylinder is not None:
         axis = exact.axis if exact.axis @ patch.cylinder.axis > 0 else -exact.axis  # the fit's sign convention
-        patch.cylinder = dataclasses.replace(patch.cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
-    elif surface.kind == "Torus":
+        cylinder = dataclasses.replace(patch.cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
+        return dataclasses.replace(patch, cylinder=cylinder)
+    if surface.kind == "Torus":
         tube = exact.tube_centre(centres)
-        if np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0:
-            patch.kinds.append("fillet")
-        patch.circle = Circle(exact.centre, exact.axis, float(exact.minor))
-    elif surface.kind == "Cone":
+        fillet = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
+        return dataclasses.replace(
+            patch,
+            kinds=[*patch.kinds, "fillet"] if fillet else patch.kinds,
+            circle=Circle(exact.centre, exact.axis, float(exact.minor)),
+        )
+    if surface.kind == "Cone":
         rel = centres - exact.apex
         radial = rel - np.outer(rel @ exact.axis, exact.axis)
         radius = np.linalg.norm(radial, axis=1)
         if np.ptp(np.linalg.norm(rel, axis=1)) < NARROW * radius.mean():  # its width along the generators
             concave = np.mean(np.einsum("ij,ij->i", radial, normals)) < 0
-            patch.kinds.append("countersink" if concave else "chamfer")
+            return dataclasses.replace(patch, kinds=[*patch.kinds, "countersink" if concave else "chamfer"])
+    return patch
 
 
 def _curve_edges(

@@ -40,8 +40,7 @@ def solid_features(target: str | Path, feature_angle: float | None = None, knowl
             job = dataclasses.replace(job, feature_angle=feature_angle)
         knowledge = [*job.knowledge, *knowledge]
         geometry, features = build_geometry(job)
-    classify(features, load_knowledge(knowledge).feature_kinds)
-    return str(target), geometry, features
+    return str(target), geometry, classify(features, load_knowledge(knowledge).feature_kinds)
 
 
 def feature_records(features: Features) -> dict:

@@ -42,7 +42,7 @@ class Cylinder:
     full_turn: bool
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Corner:
     id: str
     vertex: int
@@ -50,7 +50,7 @@ class Corner:
     names: list[str] = field(default_factory=list)
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Curve:
     """A polyline on (or, when given by a shape, inside) the solid."""
 
@@ -106,7 +106,7 @@ class Curve:
         return (1 - t) * line[seg] + t * line[seg + 1]
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Patch:
     id: str
     faces: np.ndarray
@@ -122,8 +122,12 @@ class Patch:
     surface: str | None = None  # the CAD face type (Plane, Cylinder, Torus, BSpline surface, ...), CAD input only
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Features:
+    """The features of one solid: a value (the stages after detection derive changed ones with
+    ``dataclasses.replace``: kinds by :func:`classify`, names by :func:`apply_names`, a CAD file's exact
+    surfaces and assembly by engine/cad.py), never changed in place."""
+
     corners: list[Corner]
     curves: list[Curve]
     patches: list[Patch]
@@ -199,7 +203,13 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
         truly_sharp[sharp],
         threshold,
     )
-    return Features(corners, [c if c.sharp else _unzigzagged(c) for c in curves], patches, face_patch, feature_angle)
+    return Features(
+        corners=corners,
+        curves=[c if c.sharp else _unzigzagged(c) for c in curves],
+        patches=patches,
+        face_patch=face_patch,
+        feature_angle=feature_angle,
+    )
 
 
 def _unzigzagged(curve: Curve) -> Curve:
@@ -450,7 +460,18 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
             and np.all(normals[faces] @ normal > 1 - 1e-9)
         )
         cylinder = None if planar else fit_cylinder(centres[faces], normals[faces], verts)
-        patches.append(Patch(f"patch-{k}", faces, area, normal, centroid, verts, planar, cylinder))
+        patches.append(
+            Patch(
+                id=f"patch-{k}",
+                faces=faces,
+                area=area,
+                normal=normal,
+                centroid=centroid,
+                vertices=verts,
+                planar=planar,
+                cylinder=cylinder,
+            )
+        )
     return patches, labels
 
 
@@ -485,7 +506,7 @@ def _curves(
     count, edge_curve = csgraph.connected_components(graph, directed=False)
 
     corner_vertices = np.flatnonzero(corner_mask)
-    corners = [Corner(f"corner-{i}", int(v), vertices[v].copy()) for i, v in enumerate(corner_vertices)]
+    corners = [Corner(id=f"corner-{i}", vertex=int(v), point=vertices[v].copy()) for i, v in enumerate(corner_vertices)]
     raw = []
     for k in range(count):
         members = np.flatnonzero(edge_curve == k)
@@ -504,10 +525,18 @@ def _curves(
     curves = []
     for i, (_, ordered, closed, is_convex, angle, is_sharp) in enumerate(raw):
         points = vertices[ordered]
-        curve = Curve(f"curve-{i}", points, closed, ordered, convex=is_convex, dihedral=angle, sharp=is_sharp)
-        if closed:
-            curve.circle = fit_circle(points)
-        curves.append(curve)
+        curves.append(
+            Curve(
+                id=f"curve-{i}",
+                points=points,
+                closed=closed,
+                vertices=ordered,
+                convex=is_convex,
+                dihedral=angle,
+                sharp=is_sharp,
+                circle=fit_circle(points) if closed else None,
+            )
+        )
     return corners, curves
 
 
@@ -614,13 +643,21 @@ def fit_circle_projected(points: np.ndarray, axis: np.ndarray):
 
 
 def classify(features: Features, kinds) -> Features:
-    """Give every curve and patch the feature kinds (``FeatureKind``s) whose tests it passes."""
-    for kind in kinds.values():
-        group = features.curves if kind.of == "curve" else features.patches
-        for feature in group:
-            if kind.name not in feature.kinds and all(_passes(feature, t, v) for t, v in kind.tests.items()):
-                feature.kinds.append(kind.name)
-    return features
+    """The features with every curve and patch given the feature kinds (``FeatureKind``s) whose tests it
+    passes, in the kinds' order after those it has; ``features`` is not changed."""
+
+    def classified(feature, of: str):
+        given = list(feature.kinds)
+        for kind in kinds.values():
+            if kind.of == of and kind.name not in given and all(_passes(feature, t, v) for t, v in kind.tests.items()):
+                given.append(kind.name)
+        return replace(feature, kinds=given) if len(given) > len(feature.kinds) else feature
+
+    return replace(
+        features,
+        curves=[classified(c, "curve") for c in features.curves],
+        patches=[classified(p, "patch") for p in features.patches],
+    )
 
 
 def _passes(feature, test: str, value) -> bool:
@@ -639,25 +676,36 @@ def _passes(feature, test: str, value) -> bool:
 
 
 def apply_names(features: Features, rules, given_curves=()) -> Features:
-    """Name detected features by ``rules`` (name, kind, test) and add ``given_curves``."""
-    groups = {"curve": features.curves, "patch": features.patches, "corner": features.corners}
-    for rule in rules:
-        for feature in groups[rule.kind]:
-            if rule.name not in feature.names and rule.test(feature):
-                feature.names.append(rule.name)
+    """The features named by ``rules`` (name, kind, test), in the rules' order, with ``given_curves`` added;
+    ``features`` is not changed."""
+
+    def named(feature, of: str):
+        names = list(feature.names)
+        for rule in rules:
+            if rule.kind == of and rule.name not in names and rule.test(feature):
+                names.append(rule.name)
+        return replace(feature, names=names) if len(names) > len(feature.names) else feature
+
+    curves = [named(c, "curve") for c in features.curves]
     for given in given_curves:
-        curve = Curve(
-            f"curve-{len(features.curves)}",
-            np.asarray(given.points, float),
-            given.closed,
-            None,
-            names=[given.name],
-            on_surface=False,
+        points = np.asarray(given.points, float)
+        curves.append(
+            Curve(
+                id=f"curve-{len(curves)}",
+                points=points,
+                closed=given.closed,
+                vertices=None,
+                names=[given.name],
+                on_surface=False,
+                circle=fit_circle(points) if given.closed else None,
+            )
         )
-        if given.closed:
-            curve.circle = fit_circle(curve.points)
-        features.curves.append(curve)
-    return features
+    return replace(
+        features,
+        corners=[named(c, "corner") for c in features.corners],
+        curves=curves,
+        patches=[named(p, "patch") for p in features.patches],
+    )
 
 
 # ------------------------------------------------------------------ naming features in messages

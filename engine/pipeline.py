@@ -7,7 +7,7 @@ import logging
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -77,8 +77,9 @@ def build_geometry(job: Job):
             raise JobError(
                 error.what, where=error.where or job.where("geometry", "parameters"), fix=error.fix
             ) from None
-        features = detect_features(shape.geometry, job.feature_angle, shape.face_groups)
-        features.lengths = dict(shape.lengths)
+        features = replace(
+            detect_features(shape.geometry, job.feature_angle, shape.face_groups), lengths=dict(shape.lengths)
+        )
         return shape.geometry, apply_names(features, shape.name_rules, shape.given_curves)
     if job.geometry_file.suffix.lower() in CAD_FORMATS:
         # touching solids are an assembly (no job key): Features.assembly, meshed by engine.assembly
@@ -119,7 +120,7 @@ def check_job_knowledge(job: Job, kb: KnowledgeBase) -> list[Placement]:
 
 def build_sizing(job: Job, geometry: Geometry, features: Features, kb: KnowledgeBase) -> SizingField:
     size = job.size if job.size is not None else geometry.scale / SIZE_FROM_SCALE
-    classify(features, kb.feature_kinds)
+    features = classify(features, kb.feature_kinds)  # as prepare's already are: classify adds no kind twice
     placed = bind(kb, job_placements(job, kb), features, geometry, size)
     if not placed:
         raise JobError(
@@ -215,6 +216,7 @@ def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict 
     check_job_knowledge(job, kb)
     with stage("geometry", timings):
         geometry, features = build_geometry(job)
+        features = classify(features, kb.feature_kinds)
     log.info(
         "geometry: %s, %d faces, volume %.6g, %d corners, %d curves, %d patches, named: %s (%.2f s)",
         job.shape or job.geometry_file,

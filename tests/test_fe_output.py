@@ -226,7 +226,8 @@ def test_closed_curves_parametrise_across_their_seam():
     from engine.features import Curve
 
     angles = np.linspace(0, 2 * np.pi, 72, endpoint=False)
-    circle = Curve("c", np.column_stack([10 * np.cos(angles), 10 * np.sin(angles), 0 * angles]), True, None)
+    points = np.column_stack([10 * np.cos(angles), 10 * np.sin(angles), 0 * angles])
+    circle = Curve(id="c", points=points, closed=True, vertices=None)
     seam, before, after = circle.points[0], circle.point_at(circle.length - 0.1), circle.point_at(0.1)
     s = circle.parameter(np.vstack([seam, before, after]))
     assert (
