@@ -152,14 +152,14 @@ class _Merged:
             },
         }
         return TetMesh(
-            self.points,
-            np.concatenate(self.tets),
-            level,
-            entity,
-            stats,
-            boundary[outer][order],
-            patch[outer][order],
-            self.bubble,
+            points=self.points,
+            tets=np.concatenate(self.tets),
+            node_level=level,
+            node_entity=entity,
+            stats=stats,
+            boundary=boundary[outer][order],
+            boundary_patch=patch[outer][order],
+            node_bubble=self.bubble,
             body=np.concatenate(self.body),
             interfaces=interfaces,
         )

@@ -15,7 +15,7 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class TetMesh:
     """Linear tetrahedra with node tags and, where the mesher conforms to the surface, tagged boundary faces.
 
@@ -24,6 +24,7 @@ class TetMesh:
     ``boundary`` triangles are outward and each lies on surface patch
     ``boundary_patch``; both are empty for a mesher that does not conform.
     ``node_bubble`` links nodes to the packing's bubbles and their population events.
+    A value: a stage derives a changed one with ``dataclasses.replace``.
     """
 
     points: np.ndarray  # (n, 3)

@@ -127,12 +127,19 @@ def test_a_quad_split_along_the_other_diagonal_takes_the_patch_of_the_mesher_tri
     the tets' top faces belong to patch 1, the mesher's two top triangles to no group."""
     corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], dtype=float)
     tets = np.array([[0, 1, 3, 7], [0, 1, 7, 5], [0, 5, 7, 4], [0, 3, 2, 7], [0, 2, 6, 7], [0, 6, 4, 7]])
-    assert (TetMesh(corners, tets, None, None).volumes() > 0).all()
-    faces = TetMesh(corners, tets, None, None).boundary_faces()
+    assert (TetMesh(points=corners, tets=tets, node_level=None, node_entity=None).volumes() > 0).all()
+    faces = TetMesh(points=corners, tets=tets, node_level=None, node_entity=None).boundary_faces()
     top = corners[faces][:, :, 2].min(axis=1) == 1
     declared = np.vstack([faces[~top], [[4, 5, 6], [5, 7, 6]]])  # the top split along 5-6, the tets along 4-7
     patch = np.r_[np.zeros((~top).sum(), int), 1, 1]
-    mesh = TetMesh(corners, tets, np.zeros(8, np.int8), np.zeros(8, np.int64), boundary=declared, boundary_patch=patch)
+    mesh = TetMesh(
+        points=corners,
+        tets=tets,
+        node_level=np.zeros(8, np.int8),
+        node_entity=np.zeros(8, np.int64),
+        boundary=declared,
+        boundary_patch=patch,
+    )
     owner, side, found = tet_boundary(mesh)
     on = tets[owner[:, None], SIDES[side, :3]]
     assert np.array_equal(found == 1, corners[on][:, :, 2].min(axis=1) == 1) and (found == 1).sum() == 2

@@ -183,7 +183,12 @@ def test_boundary_defects_counts_a_hole_through_the_volume():
     assert boundary_defects(mesh)["boundary_faces_through_volume"] == 0
     assert boundary_defects(mesh)["non_manifold_boundary_edges"] == 0
     inner = np.flatnonzero((mesh.node_level[mesh.tets] == NODE_LEVELS.index("volume")).all(axis=1))[0]
-    holed = TetMesh(mesh.points, np.delete(mesh.tets, inner, axis=0), mesh.node_level, mesh.node_entity)
+    holed = TetMesh(
+        points=mesh.points,
+        tets=np.delete(mesh.tets, inner, axis=0),
+        node_level=mesh.node_level,
+        node_entity=mesh.node_entity,
+    )
     defects = boundary_defects(holed)
     assert defects["boundary_faces"] == len(mesh.boundary_faces()) + 4
     assert defects["boundary_faces_through_volume"] == 4
@@ -302,7 +307,9 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
 
     points = np.array([[0, 0, 0], [1, 0, 0.05], [1, 1, 0], [0, 1, 0.05], [0.5, 0.5, -1.0]])
     tets, _ = orient(points, np.array([[0, 1, 2, 3], [0, 1, 2, 4], [0, 2, 3, 4]]))
-    boundary = TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+    boundary = TetMesh(
+        points=points, tets=tets, node_level=np.zeros(5, np.int8), node_entity=np.zeros(5, np.int64)
+    ).boundary_faces()
     patch = np.zeros(len(boundary), np.int64)
     tets, boundary, patch, removed = peel_boundary_slivers(points, tets, boundary, patch, FLOOR)
     assert removed == 1 and len(tets) == 2 and len(boundary) == len(patch) == 6
@@ -311,7 +318,9 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
         return {tuple(np.roll(f, -int(np.argmin(f)))) for f in np.asarray(faces).tolist()}
 
     assert rotated(boundary) == rotated(
-        TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+        TetMesh(
+            points=points, tets=tets, node_level=np.zeros(5, np.int8), node_entity=np.zeros(5, np.int64)
+        ).boundary_faces()
     )
     assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}
 
@@ -333,7 +342,9 @@ def test_an_inner_edge_of_needles_is_swapped_away():
     def free(t):
         return {
             tuple(sorted(f))
-            for f in TetMesh(points, t, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces().tolist()
+            for f in TetMesh(points=points, tets=t, node_level=np.zeros(5, np.int8), node_entity=np.zeros(5, np.int64))
+            .boundary_faces()
+            .tolist()
         }
 
     assert free(swapped) == free(tets)
@@ -348,12 +359,16 @@ def test_a_crowded_surface_node_is_collapsed_along_a_boundary_edge():
 
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.02, 0.02, 0.0]])
     tets, _ = orient(points, np.array([[4, 1, 2, 3], [4, 2, 0, 3], [4, 0, 1, 3]]))
-    boundary = TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces()
+    boundary = TetMesh(
+        points=points, tets=tets, node_level=np.zeros(5, np.int8), node_entity=np.zeros(5, np.int64)
+    ).boundary_faces()
     patch = np.zeros(len(boundary), np.int64)
     collapsible = np.array([False, False, False, False, True])
     tets, boundary, patch, collapsed = collapse_bad_nodes(points, tets, boundary, patch, FLOOR, collapsible)
     assert collapsed == 1 and len(tets) == 1 and len(boundary) == len(patch) == 4
     assert {tuple(np.roll(f, -int(np.argmin(f)))) for f in boundary.tolist()} == {
         tuple(np.roll(f, -int(np.argmin(f))))
-        for f in TetMesh(points, tets, np.zeros(5, np.int8), np.zeros(5, np.int64)).boundary_faces().tolist()
+        for f in TetMesh(points=points, tets=tets, node_level=np.zeros(5, np.int8), node_entity=np.zeros(5, np.int64))
+        .boundary_faces()
+        .tolist()
     }

@@ -102,7 +102,8 @@ def test_a_plugin_meshers_broken_mesh_is_rejected_by_the_acceptance_gate(tmp_pat
         "from engine.mesh import TetMesh\nfrom engine.meshing import get_mesher\n\n\n"
         "def mesh(packing, geometry, features, *, seed):\n"
         "    whole = get_mesher('delaunay')(packing, geometry, features, seed=seed)\n"
-        "    return TetMesh(whole.points, whole.tets[1:], whole.node_level, whole.node_entity)\n"
+        "    return TetMesh(points=whole.points, tets=whole.tets[1:], node_level=whole.node_level,\n"
+        "                   node_entity=whole.node_entity)\n"
     )
     monkeypatch.syspath_prepend(str(tmp_path / "src"))
     register(monkeypatch, tmp_path / "site", "holed", {"fuzzymesh.meshers": {"holed": "holed_mesher:mesh"}})

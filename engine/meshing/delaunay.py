@@ -153,7 +153,16 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         seconds["improve"],
     )
     order = np.argsort(patch, kind="stable")
-    return TetMesh(points, tets, level, entity, stats, boundary[order], patch[order], bubble)
+    return TetMesh(
+        points=points,
+        tets=tets,
+        node_level=level,
+        node_entity=entity,
+        stats=stats,
+        boundary=boundary[order],
+        boundary_patch=patch[order],
+        node_bubble=bubble,
+    )
 
 
 def _prescribe(surface, keep, prescribed):

@@ -16,6 +16,7 @@ every facet simplicial) 6.6 s and 0.45 GB.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy.spatial import Delaunay
@@ -40,15 +41,17 @@ def mesh_qhull(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     keep[keep] = geometry.contains(points[tets[keep]].mean(axis=1))
     bubble = packing.ids if packing.ids is not None else np.full(len(packing), -1)
     points, tets, level, entity, bubble, _ = compact(points, tets[keep], packing.level, packing.entity, bubble)
-    mesh = TetMesh(points, canonical(tets), level.astype(np.int8), entity, node_bubble=bubble)
-    mesh.stats = {
+    mesh = TetMesh(
+        points=points, tets=canonical(tets), node_level=level.astype(np.int8), node_entity=entity, node_bubble=bubble
+    )
+    stats = {
         "delaunay_tets": total,
         "outside_or_flat_dropped": int(total - len(tets)),
         "unused_nodes_dropped": int(len(packing) - len(points)),
         **boundary_defects(mesh),
         "seconds": {"connect": round(time.perf_counter() - start, 3)},
     }
-    return mesh
+    return replace(mesh, stats=stats)
 
 
 def boundary_defects(mesh: TetMesh) -> dict:
