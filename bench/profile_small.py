@@ -7,7 +7,7 @@ benchmark's junction-edge case (bench/cases.py) with every size x S (S = 1: abou
 Runs what ``fuzzymesh mesh --size SIZE`` runs (imports, the pipeline, the files: VTU, MSH, audit, report),
 each time in a fresh process, and prints the medians of the wall time, of the imports and of every pipeline
 stage. ``--profile`` adds one run under cProfile and the cumulative time of what the profile showed to matter
-(imports, numba loading or compiling its kernels, Gmsh, pymeshlab, matplotlib, the file writers), which
+(imports, numba loading or compiling its kernels, Gmsh, pymeshlab, the report, the file writers), which
 overlap (an import inside the report counts for both).
 """
 
@@ -38,7 +38,7 @@ ENTRIES = [
     ("meshing: node relocation", "engine/meshing/improve.py", "relocate"),
     ("boundary: pymeshlab report", "engine/quality.py", "boundary_report"),
     ("output: VTU (meshio, zlib)", "meshio/vtu/_vtu.py", "write"),
-    ("output: report HTML (matplotlib)", "engine/report.py", "render_html"),
+    ("output: report HTML (SVG plots, 3-D view)", "engine/report.py", "render_html"),
     ("output: all files", "engine/atomic.py", "write_all_or_nothing"),
 ]
 
