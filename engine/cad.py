@@ -219,7 +219,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
     if shared:
         face = np.searchsorted(faces, face_tag)
         kept = cad.kept(vertices, triangles, face, outer)
-        geometry.face_body = np.array([face_solids[k][0] for k in kept], np.int64)
+        geometry = dataclasses.replace(geometry, face_body=np.array([face_solids[k][0] for k in kept], np.int64))
         pairs = sorted({face_solids[k] for k in shared})
         features = dataclasses.replace(
             features,

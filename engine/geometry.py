@@ -26,9 +26,11 @@ SURFACE_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".off": "off", "
 TOUCH = 1e-9  # two shells closer than this times the model size touch
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Geometry:
-    """A valid solid bounded by a closed, outward-oriented triangle surface."""
+    """A valid solid bounded by a closed, outward-oriented triangle surface. A frozen value whose measures are
+    cached in its ``__dict__`` (``cached_property``; the wall thickness and curvature of engine/thickness.py and
+    engine/curvature.py): no ``slots``, and a ``dataclasses.replace`` copy starts with no caches."""
 
     mesh: trimesh.Trimesh
     source: str
@@ -182,7 +184,7 @@ def validate_surface(
         )
     for note in notes:
         log.warning("%s: %s", source, note)
-    return Geometry(mesh, source, shell_body[face_shell], notes)
+    return Geometry(mesh=mesh, source=source, face_body=shell_body[face_shell], notes=notes)
 
 
 def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:
