@@ -23,7 +23,7 @@ log = logging.getLogger(__name__)
 SAMPLES_PER_NEAR = 3  # anchor samples per finest size of the pattern
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class BoundZone:
     """A zone with its numbers evaluated for one placement."""
 
@@ -61,7 +61,7 @@ class BoundZone:
         return mu
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class PlacedPattern:
     """One pattern bound to one anchor, with evaluated parameters."""
 
@@ -353,17 +353,17 @@ def _bind_one(pattern, placement, feature, make_distance, features, geometry, gl
         numbers = zone_values(pattern, zone, env, placement, on)
         if numbers is not None:
             gap = env.get(f"gap_{role}", 0.0) if role else 0.0
-            zones.append(BoundZone(zone, **numbers, role=role, gap=gap))
+            zones.append(BoundZone(zone=zone, **numbers, role=role, gap=gap))
     suffix = f"@{feature.id}" if feature is not None and (multiple or placement.every) else ""
     return PlacedPattern(
-        placement.id + suffix,
-        pattern.name,
-        placement,
-        getattr(feature, "id", None),
-        L,
-        params,
-        zones,
-        distance,
-        roles,
+        id=placement.id + suffix,
+        pattern=pattern.name,
+        placement=placement,
+        feature=getattr(feature, "id", None),
+        length=L,
+        parameters=params,
+        zones=zones,
+        distance=distance,
+        roles=roles,
         ties=pattern.dominance == "tie",
     )
