@@ -23,7 +23,7 @@ TIERS = {"10k": 4.67, "100k": 2.17, "1M": 1.0}  # scale -> about this many tetra
 
 def junction_parameters(case: str) -> dict:
     """Every dimension of the case's solid (engine.shapes' defaults with the case's offset)."""
-    _, schema = SHAPES["plate_cylinder_junction"]
+    schema = SHAPES.details("plate_cylinder_junction")["parameters"]
     return validate({"offset": OFFSETS[case]}, schema)
 
 
