@@ -128,7 +128,15 @@ def build_sizing(job: Job, geometry: Geometry, features: Features, kb: Knowledge
             where=job.where("recipe") if job.recipe else job.where("place"),
             fix="add the base pattern 'uniform-domain' or place patterns with 'at:' on named features",
         )
-    return SizingField(placed, geometry, kb.sizing["gradation"], size, job.min_size, job.max_size, features)
+    return SizingField.build(
+        placed=placed,
+        geometry=geometry,
+        gradation=kb.sizing["gradation"],
+        global_size=size,
+        min_size=job.min_size,
+        max_size=job.max_size,
+        features=features,
+    )
 
 
 def fe_model(

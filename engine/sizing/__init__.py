@@ -13,7 +13,8 @@ h = min(raw, graded grid). Every evaluation can return its audit arrays.
 Three modules, each name importable from here (``from engine.sizing import X``):
 
 - ``binding``: placements → :class:`PlacedPattern` (``bind``: anchors, L, evaluated parameters and zones);
-- ``field``: :class:`SizingField` (dominance, gradation grid, ``evaluate`` with the audit, ``__call__``);
+- ``field``: :class:`SizingField` (a frozen value built complete by ``SizingField.build``: dominance, gradation
+  grid, ``evaluate`` with the audit, ``__call__``);
 - ``counts``: the element-count estimate (``estimate_counts``) and the guard before packing
   (``check_element_limit``).
 """

@@ -4,7 +4,7 @@ the smaller h), capped by the gradation limit on a background grid graded exactl
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -16,6 +16,8 @@ from ..errors import KnowledgeError
 from .counts import estimate_counts
 
 if TYPE_CHECKING:
+    from ..features import Features
+    from ..geometry import Geometry
     from .binding import PlacedPattern
 
 GRID_NODES = 400_000  # background grid for the gradation
@@ -42,27 +44,63 @@ class SizingAudit:
         return self.h < self.raw * (1 - GRADED_THRESHOLD)
 
 
+@dataclass(frozen=True, kw_only=True, eq=False)
 class SizingField:
-    """h(x) from placed patterns by membership dominance, with the gradation limit and bounds."""
+    """h(x) from placed patterns by membership dominance, with the gradation limit and bounds. A frozen value
+    built complete by :meth:`build` (its graded grid included); ``expected_counts`` is cached in its
+    ``__dict__`` (``cached_property``), so no ``slots``. Compared by identity (``eq=False``): it holds arrays."""
 
-    def __init__(
-        self,
-        placed: list[PlacedPattern],
+    placed: tuple[PlacedPattern, ...]
+    geometry: Geometry
+    gradation: float
+    global_size: float
+    min_size: float | None = None
+    max_size: float | None = None
+    features: Features | None = None
+    grid: np.ndarray = field(repr=False)  # graded node sizes of the background grid
+    origin: np.ndarray
+    cell: float
+    shape: tuple[int, int, int]
+    h_min: float  # smallest and largest size of the grid, within the bounds
+    h_max: float
+
+    @classmethod
+    def build(
+        cls,
+        *,
+        placed,
         geometry,
         gradation: float,
         global_size: float,
         min_size: float | None = None,
         max_size: float | None = None,
         features=None,
-    ):
+    ) -> SizingField:
+        """The field of ``placed`` on ``geometry``, its graded grid built (:func:`_graded_grid`)."""
         if not placed:
             raise KnowledgeError("no pattern is placed", fix="place the base pattern 'uniform-domain'")
-        self.placed = placed
-        self.geometry, self.features = geometry, features
-        self.global_size = global_size
-        self.gradation = gradation
-        self.min_size, self.max_size = min_size, max_size
-        self._build_grid(geometry)
+        placed = tuple(placed)
+        grid, origin, cell, shape = _graded_grid(placed, geometry, gradation, global_size)
+        h_min, h_max = float(grid.min()), float(grid.max())
+        if min_size is not None:
+            h_min = max(h_min, min_size)
+        if max_size is not None:
+            h_max = min(h_max, max_size)
+        return cls(
+            placed=placed,
+            geometry=geometry,
+            gradation=gradation,
+            global_size=global_size,
+            min_size=min_size,
+            max_size=max_size,
+            features=features,
+            grid=grid,
+            origin=origin,
+            cell=cell,
+            shape=shape,
+            h_min=h_min,
+            h_max=h_max,
+        )
 
     # -- raw composition
     def _raw(self, points: np.ndarray):
@@ -77,61 +115,6 @@ class SizingField:
         safe = np.maximum(winner, 0)
         raw = np.where(winner >= 0, size[safe, rows], self.global_size)
         return raw, winner, runner_up, zone[safe, rows], mu.T, size.T
-
-    # -- gradation grid
-    def _build_grid(self, geometry) -> None:
-        """Graded background grid G with G <= raw everywhere, so h = G is exactly Lipschitz.
-
-        Each cell gets a lower bound of the raw size over the whole cell (interval
-        bounds of every pattern's mu and h over the cell, keeping only patterns
-        that can win somewhere in it; a pattern is bounded only on the cells
-        its anchor's box grown by its reach holds, elsewhere its mu is 0); each
-        node the minimum over its 8 cells;
-        then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
-        Trilinear interpolation of such a grid is Euclidean-Lipschitz with g - 1
-        and never exceeds the raw size.
-        """
-        lo, hi = geometry.bounds
-        extent = hi - lo
-        cell = float(np.cbrt(np.prod(extent) / GRID_NODES))
-        cell = max(cell, float(extent.max()) / 512)
-        shape = tuple(int(np.ceil(e / cell)) + 3 for e in extent)
-        origin = lo - cell
-        cells_shape = tuple(n - 1 for n in shape)
-        half_diagonal = 0.5 * math.sqrt(3.0) * cell
-        bounded = []  # (cells, mu low, mu high, h low) per placed pattern
-        for placed in self.placed:
-            index = _cells_near(placed.distance, placed.reach + 2 * half_diagonal, origin, cell, cells_shape)
-            centres = origin + cell * (np.column_stack(np.unravel_index(index, cells_shape)) + 0.5)
-            bounded.append((index, *placed.bounds(centres, half_diagonal)))
-        best_low = np.zeros(math.prod(cells_shape))
-        for index, m_lo, _, _ in bounded:
-            best_low[index] = np.maximum(best_low[index], m_lo)
-        cell_low = np.full(len(best_low), np.inf)
-        for index, _, m_hi, h_lo in bounded:
-            can_win = (m_hi > 0) & (m_hi >= best_low[index])
-            cell_low[index[can_win]] = np.minimum(cell_low[index[can_win]], h_lo[can_win])
-        cell_low = np.where(best_low > 0, cell_low, np.minimum(cell_low, self.global_size))
-        cells = cell_low.reshape(cells_shape)
-        padded = np.pad(cells, 1, mode="edge")
-        nodes = np.full(shape, np.inf)
-        for corner in np.ndindex(2, 2, 2):
-            nodes = np.minimum(
-                nodes,
-                padded[
-                    corner[0] : corner[0] + shape[0], corner[1] : corner[1] + shape[1], corner[2] : corner[2] + shape[2]
-                ],
-            )
-        rate = (self.gradation - 1.0) / math.sqrt(3.0)
-        grid = nodes
-        for axis in range(3):
-            grid = _grade_along(grid, axis, rate * cell)
-        self.grid, self.origin, self.cell, self.shape = grid, origin, cell, shape
-        self.h_min, self.h_max = float(grid.min()), float(grid.max())
-        if self.min_size is not None:
-            self.h_min = max(self.h_min, self.min_size)
-        if self.max_size is not None:
-            self.h_max = min(self.h_max, self.max_size)
 
     def _graded(self, points: np.ndarray) -> np.ndarray:
         """Trilinear interpolation of the graded grid."""
@@ -161,6 +144,56 @@ class SizingField:
     def expected_counts(self) -> tuple[float, float]:
         """(nodes, tetrahedra) a packing of this field should have (:func:`estimate_counts`), computed once."""
         return estimate_counts(self.geometry, self, self.features)
+
+
+def _graded_grid(placed_patterns, geometry, gradation: float, global_size: float):
+    """Graded background grid G with G <= raw everywhere, so h = G is exactly Lipschitz.
+
+    Each cell gets a lower bound of the raw size over the whole cell (interval
+    bounds of every pattern's mu and h over the cell, keeping only patterns
+    that can win somewhere in it; a pattern is bounded only on the cells
+    its anchor's box grown by its reach holds, elsewhere its mu is 0); each
+    node the minimum over its 8 cells;
+    then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
+    Trilinear interpolation of such a grid is Euclidean-Lipschitz with g - 1
+    and never exceeds the raw size.
+    """
+    lo, hi = geometry.bounds
+    extent = hi - lo
+    cell = float(np.cbrt(np.prod(extent) / GRID_NODES))
+    cell = max(cell, float(extent.max()) / 512)
+    shape = tuple(int(np.ceil(e / cell)) + 3 for e in extent)
+    origin = lo - cell
+    cells_shape = tuple(n - 1 for n in shape)
+    half_diagonal = 0.5 * math.sqrt(3.0) * cell
+    bounded = []  # (cells, mu low, mu high, h low) per placed pattern
+    for placed in placed_patterns:
+        index = _cells_near(placed.distance, placed.reach + 2 * half_diagonal, origin, cell, cells_shape)
+        centres = origin + cell * (np.column_stack(np.unravel_index(index, cells_shape)) + 0.5)
+        bounded.append((index, *placed.bounds(centres, half_diagonal)))
+    best_low = np.zeros(math.prod(cells_shape))
+    for index, m_lo, _, _ in bounded:
+        best_low[index] = np.maximum(best_low[index], m_lo)
+    cell_low = np.full(len(best_low), np.inf)
+    for index, _, m_hi, h_lo in bounded:
+        can_win = (m_hi > 0) & (m_hi >= best_low[index])
+        cell_low[index[can_win]] = np.minimum(cell_low[index[can_win]], h_lo[can_win])
+    cell_low = np.where(best_low > 0, cell_low, np.minimum(cell_low, global_size))
+    cells = cell_low.reshape(cells_shape)
+    padded = np.pad(cells, 1, mode="edge")
+    nodes = np.full(shape, np.inf)
+    for corner in np.ndindex(2, 2, 2):
+        nodes = np.minimum(
+            nodes,
+            padded[
+                corner[0] : corner[0] + shape[0], corner[1] : corner[1] + shape[1], corner[2] : corner[2] + shape[2]
+            ],
+        )
+    rate = (gradation - 1.0) / math.sqrt(3.0)
+    grid = nodes
+    for axis in range(3):
+        grid = _grade_along(grid, axis, rate * cell)
+    return grid, origin, cell, shape
 
 
 def _cells_near(distance, bound: float, origin: np.ndarray, cell: float, shape: tuple) -> np.ndarray:
