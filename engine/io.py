@@ -24,9 +24,10 @@ ABAQUS_FACE = {3: "S1", 2: "S2", 0: "S3", 1: "S4"}  # C3D4/C3D10 face by the loc
 WRITERS = Registry(None, [], Writer, noun="writer")  # one per output format: @WRITERS.register("vtu") below
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class FEModel:
-    """What the files hold: nodes, linear or quadratic tets, the boundary and the named groups."""
+    """What the files hold: nodes, linear or quadratic tets, the boundary and the named groups. A frozen value,
+    built complete by :meth:`build`; a hex-dominant mesh's model is a ``dataclasses.replace`` copy of it."""
 
     points: np.ndarray
     tets: np.ndarray  # (m, 4) or (m, 10)
@@ -40,8 +41,9 @@ class FEModel:
     mixed: object | None = None  # a hex-dominant mesh's cells, data and groups (engine.hexdom.MixedModel)
 
     @staticmethod
-    def build(mesh: TetMesh, groups=(), quadratic=None, audit=None) -> "FEModel":
-        """``quadratic``: (points, tets10, triangle6) from engine.fe.quadratic, or None for linear."""
+    def build(mesh: TetMesh, *, groups=(), quadratic=None, audit=None, cell_data=None) -> "FEModel":
+        """``quadratic``: (points, tets10, triangle6) from engine.fe.quadratic, or None for linear; ``cell_data``:
+        more per-element fields, after the audit's."""
         if quadratic is None:
             quadratic = mesh.points, mesh.tets, side_cells(mesh.tets, *tet_boundary(mesh)[:2])
         points, tets, boundary = quadratic
@@ -52,15 +54,15 @@ class FEModel:
 
         point_data = {k: pad(v) for k, v in audit.nodes.items()} if audit else {}
         return FEModel(
-            points,
-            tets,
-            boundary,
-            pad(mesh.node_level),
-            pad(mesh.node_entity),
-            list(groups),
-            dict(audit.cells) if audit else {},
-            point_data,
-            audit.legend if audit else None,
+            points=points,
+            tets=tets,
+            boundary=boundary,
+            node_level=pad(mesh.node_level),
+            node_entity=pad(mesh.node_entity),
+            groups=list(groups),
+            cell_data={**(audit.cells if audit else {}), **(cell_data or {})},
+            point_data=point_data,
+            legend=audit.legend if audit else None,
         )
 
     @property

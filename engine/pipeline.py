@@ -44,8 +44,11 @@ DEFAULT_MAX_ELEMENTS = 20_000_000
 SIZE_FROM_SCALE = 40.0  # default global size = model size (bounding-box diagonal) / this
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Result:
+    """What ``run`` made: the stages' values, the figures and the files written. A frozen value; ``run`` derives
+    the one with its files by ``dataclasses.replace``."""
+
     job: Job
     geometry: Geometry
     features: Features
@@ -153,9 +156,13 @@ def fe_model(
     bodies' and features' named groups, the audit, and the cell field ``body`` (1-based)."""
     quadratic_elements = quadratic(mesh, geometry, features, floor, exact=exact) if job.output_order == 2 else None
     body = tet_bodies(mesh, geometry)
-    model = FEModel.build(mesh, feature_groups(mesh, features, body), quadratic_elements, audit)
-    model.cell_data["body"] = (body + 1).astype(np.int32)
-    return model
+    return FEModel.build(
+        mesh,
+        groups=feature_groups(mesh, features, body),
+        quadratic=quadratic_elements,
+        audit=audit,
+        cell_data={"body": (body + 1).astype(np.int32)},
+    )
 
 
 def write_files(model: FEModel, summary: dict, job: Job, name: str) -> list[Path]:
@@ -455,13 +462,13 @@ def run(
     for warning in warnings:
         log.warning(warning)
     result = Result(
-        job,
-        geometry,
-        features,
-        sizing,
-        packing,
-        mesh,
-        timings,
+        job=job,
+        geometry=geometry,
+        features=features,
+        sizing=sizing,
+        packing=packing,
+        mesh=mesh,
+        timings=timings,
         quality=quality,
         audit=audit,
         conformity=conformity,
@@ -505,6 +512,7 @@ def run(
     log.info("acceptance: passed (%.2f s)", timings["acceptance"])
     if write:
         with stage("output", timings):
-            result.files = write_files(model, {**report_summary(result), "warnings": warnings}, job, job.output_name)
+            files = write_files(model, {**report_summary(result), "warnings": warnings}, job, job.output_name)
+            result = replace(result, files=files)
         log.info("output: %s (%.2f s)", ", ".join(map(str, result.files)), timings["output"])
     return result
