@@ -105,9 +105,10 @@ def job_schema() -> dict:
     }
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Job:
-    """A validated job."""
+    """A validated job: a frozen value built by :func:`job_from_dict`; a changed one (the CLI's overrides) is a
+    ``dataclasses.replace`` copy."""
 
     source: str  # job file path or '<dict>'
     base_dir: Path  # relative paths resolve against this
