@@ -44,9 +44,7 @@ kinds:
 def _kinds(tmp_path):
     path = tmp_path / "kinds.yaml"
     path.write_text(KINDS)
-    kb = KnowledgeBase()
-    kb.add_file(path)
-    return kb.feature_kinds
+    return KnowledgeBase().with_file(path).feature_kinds
 
 
 def _prism():

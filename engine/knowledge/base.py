@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -24,8 +24,11 @@ from .rulebases import load_rules
 FILE_KINDS = ("rules", "pattern", "recipe", "features", "sizing")
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class KnowledgeBase:
+    """Every knowledge file read, by kind. A frozen value: :meth:`with_file` returns a new one with a file's items
+    added (the tables are new dicts; the input is never patched, nor left half-changed by a file that fails)."""
+
     rulebases: dict[str, RuleBase] = field(default_factory=dict)
     patterns: dict[str, Pattern] = field(default_factory=dict)
     recipes: dict[str, Recipe] = field(default_factory=dict)
@@ -41,7 +44,8 @@ class KnowledgeBase:
     )
     packer_settings: dict[str, dict] = field(default_factory=dict)  # rule file id -> its packer settings
 
-    def add_file(self, path: Path) -> None:
+    def with_file(self, path: Path) -> KnowledgeBase:
+        """This knowledge base with the file at ``path`` read into it by its ``kind:``."""
         raw = load_fcl(path) if Path(path).suffix == ".fcl" else load_yaml(path, KnowledgeError)
         source = str(path)
         if not isinstance(raw, Located):
@@ -56,36 +60,44 @@ class KnowledgeBase:
         if kind == "rules":
             bases, settings = load_rules(raw, source)
             names = raw["rulebases"]
-            self._add(
+            rulebases = self._add(
                 self.rulebases,
                 "rule base",
                 {f"{raw['id']}.{n}": (bases[f"{raw['id']}.{n}"], names.where(n)) for n in names},
                 raw,
             )
+            packer_settings = self.packer_settings
             if settings is not None:
-                self.packer_settings[str(raw["id"])] = settings
-        elif kind == "pattern":
+                packer_settings = {**packer_settings, str(raw["id"]): settings}
+            return replace(self, rulebases=rulebases, packer_settings=packer_settings)
+        if kind == "pattern":
             pattern = load_pattern(raw, source)
-            self._add(self.patterns, "pattern", {pattern.name: (pattern, raw.where("name"))}, raw)
-        elif kind == "recipe":
+            return replace(
+                self, patterns=self._add(self.patterns, "pattern", {pattern.name: (pattern, raw.where("name"))}, raw)
+            )
+        if kind == "recipe":
             recipe = load_recipe(raw, source)
-            self._add(self.recipes, "recipe", {recipe.name: (recipe, raw.where("name"))}, raw)
-        elif kind == "features":
+            return replace(
+                self, recipes=self._add(self.recipes, "recipe", {recipe.name: (recipe, raw.where("name"))}, raw)
+            )
+        if kind == "features":
             kinds = load_feature_kinds(raw, source)
-            self._add(self.feature_kinds, "feature kind", {name: (fk, fk.source) for name, fk in kinds.items()}, raw)
-        else:
-            self.sizing = validate(raw, SIZING_FILE, KnowledgeError)
-            self.sizing["acceptance"] = Tolerances(**(self.sizing["acceptance"] or {}))
-            self.sizing["where"] = raw.where("base_pattern")
-            if "always_place" in raw:
-                self.sizing["always_place"] = load_placements(
-                    raw["always_place"], raw.where("always_place"), "sizing defaults", "always"
-                )
+            items = {name: (fk, fk.source) for name, fk in kinds.items()}
+            return replace(self, feature_kinds=self._add(self.feature_kinds, "feature kind", items, raw))
+        sizing = validate(raw, SIZING_FILE, KnowledgeError)
+        sizing["acceptance"] = Tolerances(**(sizing["acceptance"] or {}))
+        sizing["where"] = raw.where("base_pattern")
+        if "always_place" in raw:
+            sizing["always_place"] = load_placements(
+                raw["always_place"], raw.where("always_place"), "sizing defaults", "always"
+            )
+        return replace(self, sizing=sizing)
 
     @staticmethod
-    def _add(table: dict, noun: str, items: dict, raw: Located) -> None:
-        """Add a file's named items ``{name: (value, where)}``: a name read before is an error unless the file
-        says ``overrides: true``, and then every name must replace one (so a misspelt name is no new one)."""
+    def _add(table: dict, noun: str, items: dict, raw: Located) -> dict:
+        """``table`` with a file's named items ``{name: (value, where)}`` added, a new dict: a name read before is
+        an error unless the file says ``overrides: true``, and then every name must replace one (so a misspelt
+        name is no new one)."""
         overrides = raw.get("overrides") is True
         for key, (value, where) in items.items():
             if key in table and not overrides:
@@ -101,7 +113,7 @@ class KnowledgeBase:
                     where,
                     f"remove 'overrides: true', or name the {noun} it replaces",
                 )
-        table.update({key: value for key, (value, _) in items.items()})
+        return {**table, **{key: value for key, (value, _) in items.items()}}
 
     def problems(self, sizings: list[dict] | None = None) -> list[FuzzymeshError]:
         """The cross-file checks, the first problem of each recipe and of the sizing defaults (``sizings``: of

@@ -17,14 +17,14 @@ def lint(paths) -> list[str]:
     for path in yaml_files(default_paths()):  # what the linted files add to, or must say they override
         if path.resolve() not in linted:
             try:
-                kb.add_file(path)
+                kb = kb.with_file(path)
             except FuzzymeshError:
                 pass
     errors, sizings = [], []
     for path in files:
         try:
             before = kb.sizing
-            kb.add_file(path)
+            kb = kb.with_file(path)
             if kb.sizing is not before:
                 sizings.append(kb.sizing)
         except FuzzymeshError as exc:

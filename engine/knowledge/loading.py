@@ -32,6 +32,6 @@ def load_knowledge(extra_paths=()) -> KnowledgeBase:
     """The default knowledge base plus ``extra_paths`` (files or folders)."""
     kb = KnowledgeBase()
     for path in yaml_files([*default_paths(), *extra_paths]):
-        kb.add_file(path)
+        kb = kb.with_file(path)
     kb.check()
     return kb
