@@ -277,7 +277,8 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     surface: it is wider (its area over the length of its bending border) than WIDE x the faces it bends
     into (their height over the shared edge); a region that bends nowhere is. A CAD tessellation's flat
     wall of two triangles beside a fillet is wide; a cylinder's strip or two coplanar facets at a
-    sphere's corner are not."""
+    sphere's corner are not, nor is one facet alone (a long facet of a coarse cylinder between a sharp edge
+    and a keyway's corner: its border is the short edge)."""
     count = int(region.max()) + 1
     ends = mesh.vertices[_shared_edges(mesh, bent)]
     length = np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1)
@@ -288,7 +289,7 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     height = 2 * area[other] / np.maximum(length, 1e-300)
     beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
     width = np.bincount(region, weights=area, minlength=count) / np.maximum(border, 1e-300)
-    return width > WIDE * beyond
+    return (width > WIDE * beyond) & (np.bincount(region, minlength=count) > 1)
 
 
 def _components(n: int, pairs: np.ndarray) -> np.ndarray:
