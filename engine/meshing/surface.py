@@ -13,7 +13,7 @@ unconstrained edges. Triangles come out oriented outward.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import igl
 import igl.triangle
@@ -119,6 +119,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
         if len(coarse) == 0:
             break
         nodes = _split_chain_edges(nodes, features, chains, coarse)
+    moved = np.zeros(len(nodes), bool)  # patch nodes given to the patch across a smooth cut
     for round in range(SPLIT_ROUNDS):
         chains = curve_chains(nodes, features)
         triangles, patch_of, dropped, missed, added = [], [], [], [], []
@@ -155,6 +156,15 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             missed.append(members[lost])
         missed = np.unique(np.sort(np.concatenate(missed), axis=1), axis=0) if missed else np.zeros((0, 2), np.int64)
         if len(missed) == 0:
+            across = _across_smooth_cuts(
+                nodes, features, chains, sides, np.concatenate([*triangles, *dropped], axis=None)
+            )
+            moved = np.r_[moved, np.zeros(len(nodes) - len(moved), bool)]  # split chain edges added curve nodes
+            across[moved] = -1  # a node moves once
+            if (across >= 0).any():
+                moved |= across >= 0
+                nodes = replace(nodes, entity=np.where(across >= 0, across, nodes.entity))
+                continue  # the patches on both sides again
             nodes = Packing.concatenate([nodes, *added], nodes.stats)
             break
         nodes = _split_chain_edges(nodes, features, chains, missed)
@@ -168,6 +178,45 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
         np.concatenate(dropped).astype(np.int64) if dropped else np.zeros(0, np.int64),
         nodes,
     )
+
+
+def _across_smooth_cuts(nodes, features, chains, sides, used) -> np.ndarray:
+    """(n,) the patch each patch node outside its own patch's triangles (not in ``used``) belongs to when the
+    chain edge nearest to it is a smooth cut's: the patch on the cut's other side; -1 for every other node.
+    A smoothed cut crosses facets (``_unzigzagged``), so a strip of one patch's input faces lies beyond it:
+    nodes packed there are outside their patch's chains, and the patch across has no faces to put nodes on."""
+    across = np.full(len(nodes), -1)
+    free = np.ones(len(nodes), bool)
+    free[used[used < len(nodes)]] = False  # (the holes' added points come after the nodes)
+    stranded = np.flatnonzero(free & (nodes.level == PATCH))
+    if len(stranded) == 0:
+        return across
+    ends, curve = [], []
+    for index, chain in chains.items():
+        pairs = (
+            np.column_stack([chain, np.roll(chain, -1)])
+            if features.curves[index].closed
+            else np.column_stack([chain[:-1], chain[1:]])
+        )
+        ends.append(pairs)
+        curve.append(np.full(len(pairs), index))
+    if not ends:
+        return across
+    ends, curve = np.concatenate(ends), np.concatenate(curve)
+    left_right = np.array([sides[c] for c in curve]).reshape(-1, 2)
+    for p in np.unique(nodes.entity[stranded]):
+        node = stranded[nodes.entity[stranded] == p]
+        border = np.flatnonzero((left_right == p).any(axis=1))
+        if len(border) == 0:
+            continue
+        a, b, x = nodes.points[ends[border, 0]], nodes.points[ends[border, 1]], nodes.points[node][:, None, :]
+        span = b - a
+        t = np.clip(np.sum((x - a) * span, axis=2) / np.maximum(np.sum(span * span, axis=1), 1e-300), 0, 1)
+        nearest = border[np.argmin(np.linalg.norm(a + t[..., None] * span - x, axis=2), axis=1)]
+        smooth = ~np.array([features.curves[c].sharp for c in curve[nearest]], dtype=bool)
+        other = np.where(left_right[nearest, 0] == p, left_right[nearest, 1], left_right[nearest, 0])
+        across[node[smooth & (other >= 0)]] = other[smooth & (other >= 0)]
+    return across
 
 
 def _border_edges(p, chains, sides, features) -> np.ndarray:

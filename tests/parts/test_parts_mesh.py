@@ -4,8 +4,7 @@ static-stress recipe, from both of its tessellations, into a valid mesh that fol
 Checked on the pipeline's own result (no files): every tet of positive volume, a closed two-manifold
 boundary, min dihedral >= 10 deg, volume within 0.5 % of the STL's, and the two-sided Hausdorff
 distance between the mesh boundary and the input surface within 0.1 h (h the target size there).
-Cases known not to meet a bound yet are strict xfails naming the bound, so a fix shows up as a pass;
-the heavy ones run in bench/parts.py.
+The heavy ones run in bench/parts.py.
 """
 
 from __future__ import annotations
@@ -45,19 +44,6 @@ MIN_DIHEDRAL = 10.0
 VOLUME = 0.005
 HAUSDORFF = 0.1  # x h
 
-# (part, tessellation, recipe) -> (the bound it does not meet yet, how it fails)
-KNOWN = {
-    ("stepped_shaft", "coarse", "static-stress"): (
-        "mesh -> input 0.13 h: elements finer than the 15 deg STL's facets, chords across its creases",
-        AssertionError,
-    ),
-    ("torus_ring", "coarse", None): (
-        "mesh -> input 0.13 h, as the shaft's (a torus fits no exact surface)",
-        AssertionError,
-    ),
-    ("torus_ring", "coarse", "static-stress"): ("mesh -> input 0.13 h, as the default", AssertionError),
-}
-
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):
@@ -69,9 +55,8 @@ def _cases():
     for case in CASES:
         if case in HEAVY:
             continue
-        marks = [pytest.mark.xfail(strict=True, reason=KNOWN[case][0], raises=KNOWN[case][1])] if case in KNOWN else []
         part, tessellation, recipe = case
-        yield pytest.param(*case, marks=marks, id=f"{part}-{tessellation}-{recipe or 'default'}")
+        yield pytest.param(*case, id=f"{part}-{tessellation}-{recipe or 'default'}")
 
 
 def _surface_samples(vertices, triangles, count, rng):
