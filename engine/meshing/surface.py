@@ -156,9 +156,8 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             missed.append(members[lost])
         missed = np.unique(np.sort(np.concatenate(missed), axis=1), axis=0) if missed else np.zeros((0, 2), np.int64)
         if len(missed) == 0:
-            across = _across_smooth_cuts(
-                nodes, features, chains, sides, np.concatenate([*triangles, *dropped], axis=None)
-            )
+            used = np.concatenate([np.zeros(0, np.int64), *triangles, *dropped], axis=None)
+            across = _across_smooth_cuts(nodes, features, chains, sides, used)
             moved = np.r_[moved, np.zeros(len(nodes) - len(moved), bool)]  # split chain edges added curve nodes
             across[moved] = -1  # a node moves once
             if (across >= 0).any():
