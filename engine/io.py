@@ -86,17 +86,50 @@ def to_meshio(model: FEModel, audit: bool = False) -> meshio.Mesh:
 
 
 def to_med(model: FEModel) -> meshio.Mesh:
-    """The VTU's tetrahedra and fields, with the element groups (``solid``, ``solid-1``, ...) as MED families."""
+    """The VTU's tetrahedra and fields with the element groups (``solid``, ``solid-1``, ...) as MED families, and
+    the face groups (patches, named surfaces, an assembly's interfaces) as families of one triangle section (for
+    boundary conditions in Code_Aster or Salome); a face carries the fields of a tet it bounds."""
     data = to_meshio(model, audit=True)
     solids = [g for g in model.groups if g.dim == 3]
-    if solids:
-        member = np.zeros((len(model.tets), len(solids)), dtype=bool)
-        for k, group in enumerate(solids):
-            member[group.cells, k] = True
-        combinations, family = np.unique(member, axis=0, return_inverse=True)
-        data.cell_data["cell_tags"] = [-1 - family.ravel()]  # element families are numbered from -1 down
-        data.cell_tags = {-1 - f: [g.name for g, m in zip(solids, row) if m] for f, row in enumerate(combinations)}
-    return data
+    faces = [g for g in model.groups if g.dim == 2]
+    tet_family, data.cell_tags = _families(solids, [g.cells for g in solids], len(model.tets), first=-1)
+    if not faces:
+        if solids:
+            data.cell_data["cell_tags"] = [tet_family]
+        return data
+    cells = [_group_cells(model, g) for g in faces]
+    every = np.concatenate(cells)
+    _, first, which = np.unique(np.sort(every[:, :3], axis=1), axis=0, return_index=True, return_inverse=True)
+    ends = np.cumsum([0] + [len(c) for c in cells])
+    members = [which.ravel()[a:b] for a, b in zip(ends[:-1], ends[1:])]
+    face_family, face_tags = _families(faces, members, len(first), first=-1 - len(data.cell_tags))
+    data.cell_tags.update(face_tags)
+    owner, _ = face_owners(model.tets[:, :4], len(model.points), every[first, :3])
+    with_faces = meshio.Mesh(
+        data.points,
+        [*data.cells, ("triangle6" if model.quadratic else "triangle", every[first])],
+        point_data=data.point_data,
+        cell_data={"cell_tags": [tet_family, face_family]}
+        | {name: [values[0], values[0][owner]] for name, values in data.cell_data.items()},
+    )
+    with_faces.cell_tags = data.cell_tags  # meshio's MED writer reads the family names from here
+    return with_faces
+
+
+def _families(groups: list, members: list[np.ndarray], count: int, first: int) -> tuple[np.ndarray, dict]:
+    """MED families of ``count`` cells, ``members[k]`` (indices) the cells of ``groups[k]``: (count,) family
+    numbers (``first``, ``first`` - 1, ... one per combination of groups, 0 for a cell in none) and
+    {family number: its group names}."""
+    member = np.zeros((count, len(groups)), dtype=bool)
+    for k, cells in enumerate(members):
+        member[cells, k] = True
+    combinations, family = np.unique(member, axis=0, return_inverse=True)
+    named = combinations.any(axis=1)
+    numbers = np.where(named, first + 1 - np.cumsum(named), 0)
+    tags = {
+        int(numbers[f]): [g.name for g, m in zip(groups, row) if m] for f, row in enumerate(combinations) if named[f]
+    }
+    return numbers[family.ravel()], tags
 
 
 def to_gmsh(model: FEModel) -> meshio.Mesh:

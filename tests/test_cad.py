@@ -210,7 +210,7 @@ def _cli_job(tmp_path: Path, path: Path, order: int = 1, knowledge: str | None =
     import yaml
 
     data = {"geometry": {"file": str(path)}, **keys}
-    data["output"] = {"directory": "out", "formats": ["vtu", "msh", "inp"], "order": order}
+    data["output"] = {"directory": "out", "formats": ["vtu", "msh", "inp", "med"], "order": order}
     if knowledge is not None:
         (tmp_path / "kb").mkdir()
         (tmp_path / "kb" / "sizing.yaml").write_text(knowledge)
@@ -241,7 +241,8 @@ def test_an_assembly_meshes_through_the_cli(step_files, tmp_path, part, size, or
     """Touching solids of a STEP file, no job key: OpenCASCADE's fragment, each solid meshed with the union's
     sizing, the shared face triangulated once. The .msh holds each body as a group whose volume is its CAD
     solid's, the interface as a group of triangles (triangle6 at order 2) that are faces of tets of both bodies
-    (mid-edge nodes included), no duplicate nodes; the .inp each body's element set and the interface surface;
+    (mid-edge nodes included), no duplicate nodes; the .inp each body's element set and the interface surface; the
+    .med the interface as a face group;
     the VTU the body field; the report is written."""
     job = _cli_job(tmp_path, step_files[part][0], order, size=size)
     assert main(["mesh", str(job), "--quiet"]) == 0
@@ -272,6 +273,11 @@ def test_an_assembly_meshes_through_the_cli(step_files, tmp_path, part, size, or
     inp = meshio.read(out / "mesh.inp")
     assert [len(inp.cell_sets[name][0]) for name in ("solid_1", "solid_2")] == [len(t) for t in bodies]
     assert "*SURFACE, TYPE=ELEMENT, NAME=interface_solid_1_solid_2" in (out / "mesh.inp").read_text()
+    med = meshio.read(out / "mesh.med")
+    kind = "triangle6" if order == 2 else "triangle"
+    named = [f for f, names in med.cell_tags.items() if "interface-solid-1-solid-2" in names]
+    in_med = med.cells_dict[kind][np.isin(med.cell_data_dict["cell_tags"][kind], named)]
+    assert {tuple(row) for row in in_med.tolist()} == {tuple(row) for row in interface.tolist()}
 
 
 def test_an_assembly_body_off_its_cad_volume_is_rejected(step_files, tmp_path, capsys):

@@ -139,6 +139,31 @@ def test_nastran_and_med_hold_the_same_mesh(root):
     assert np.allclose(med.cell_data["h_target"][0], vtu.cell_data["h_target"][0]), "the audit travels in MED"
 
 
+@pytest.mark.parametrize("order", [1, 2])
+def test_med_face_groups_are_the_msh_surface_groups(root, order):
+    """Every surface group of the .msh (patches, named surfaces) is a MED family group of the same triangles
+    (triangle6 with the same mid-edge nodes at order 2), and the tets keep their families and fields."""
+    out = written(root, order)
+    msh, med = meshio.read(out / "mesh.msh"), meshio.read(out / "mesh.med")
+    kind = "triangle6" if order == 2 else "triangle"
+    faces = med.cells_dict[kind]
+    family = med.cell_data_dict["cell_tags"][kind]
+    in_group = {}
+    for number, names in med.cell_tags.items():
+        for name in names:
+            in_group.setdefault(name, set()).add(number)
+    physical = msh.cell_data_dict["gmsh:physical"][kind]
+    surfaces = {name: tag for name, (tag, dim) in msh.field_data.items() if dim == 2}
+    assert {"cylinder", "top", "bottom"} <= set(surfaces)
+    for name, tag in surfaces.items():
+        expected = {tuple(row) for row in msh.cells_dict[kind][physical == tag].tolist()}
+        got = {tuple(row) for row in faces[np.isin(family, list(in_group[name]))].tolist()}
+        assert got == expected, name
+    tet = "tetra10" if order == 2 else "tetra"
+    assert {"solid"} <= set(in_group) and (med.cell_data_dict["cell_tags"][tet] < 0).all()
+    assert len(med.cell_data_dict["h_target"][tet]) == len(med.cells_dict[tet])
+
+
 def test_mid_edge_nodes_on_flat_faces_stay_at_the_midpoint():
     """A corner counts as on a curve only where it ends that curve: an edge from a box corner to a node of
     another box edge is a diagonal of a flat face, and its mid-node stays at the edge's midpoint; only
