@@ -372,3 +372,36 @@ def test_a_crowded_surface_node_is_collapsed_along_a_boundary_edge():
         .boundary_faces()
         .tolist()
     }
+
+
+def test_a_surface_node_no_triangle_uses_is_left_out(monkeypatch):
+    """A surface node that no boundary triangle uses (a patch node its patch's triangulation left out) lies on the
+    surface, here on a boundary triangle's centroid: it stays out of the constrained Delaunay (a node on a
+    constrained triangle made Gmsh fail to recover it, on a filleted flange of 680k nodes) and is counted."""
+    from dataclasses import replace
+
+    import engine.meshing.delaunay as delaunay
+    from engine.packing import Packing
+
+    real = delaunay.triangulate_boundary
+    centre = []
+
+    def with_a_stray_node(packing, geometry, features):
+        surface = real(packing, geometry, features)
+        centre.append(surface.nodes.points[surface.triangles[0]].mean(axis=0))
+        stray = Packing(
+            points=centre[0][None],
+            level=np.array([PATCH], np.int8),
+            entity=surface.patch[:1],
+            radius=surface.nodes.radius[surface.triangles[0, :1]],
+            ids=np.array([-1]),
+        )
+        return replace(surface, nodes=Packing.concatenate([surface.nodes, stray], surface.nodes.stats))
+
+    geometry, features, _, packing = packed("l_bracket")
+    before = meshed("l_bracket").stats["unused_surface_nodes_dropped"]
+    monkeypatch.setattr(delaunay, "triangulate_boundary", with_a_stray_node)
+    mesh = get_mesher("delaunay")(packing, geometry, features, seed=0)
+    assert mesh.stats["unused_surface_nodes_dropped"] == before + 1
+    assert (tet_quality(mesh.points, mesh.tets).volume > 0).all()
+    assert np.linalg.norm(mesh.points - centre[0], axis=1).min() > 1e-9
