@@ -405,3 +405,25 @@ def test_a_surface_node_no_triangle_uses_is_left_out(monkeypatch):
     assert mesh.stats["unused_surface_nodes_dropped"] == before + 1
     assert (tet_quality(mesh.points, mesh.tets).volume > 0).all()
     assert np.linalg.norm(mesh.points - centre[0], axis=1).min() > 1e-9
+
+
+def test_chain_edges_a_triangulation_keeps_missing_are_refused_with_their_place(monkeypatch):
+    """A patch triangulation that misses a chain edge round after round (here forced) ends in one message that
+    names where: the point around the missed edges and their curves with centroids."""
+    import engine.meshing.surface as surface
+
+    real = surface._triangulate_patch
+
+    def missing_one(patch, geometry, points, radius, constraints, droppable, constrained=False):
+        tri, crowded, lost, new_points, new_radius = real(
+            patch, geometry, points, radius, constraints, droppable, constrained
+        )
+        return tri, crowded, constraints[:1], new_points, new_radius
+
+    geometry, features, _, packing = packed("l_bracket")
+    monkeypatch.setattr(surface, "_triangulate_patch", missing_one)
+    with pytest.raises(RuntimeError) as error:
+        surface.triangulate_boundary(packing, geometry, features)
+    message = str(error.value)
+    assert "feature-curve edges still missing from the surface triangulation, around (" in message
+    assert "(centroid " in message and "curve-" in message

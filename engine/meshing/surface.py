@@ -23,7 +23,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
-from ..features import conformal_map, describe
+from ..features import conformal_map, coordinates, describe
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
@@ -160,7 +160,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             across = _across_smooth_cuts(nodes, features, chains, sides, used)
             moved = np.r_[moved, np.zeros(len(nodes) - len(moved), bool)]  # split chain edges added curve nodes
             across[moved] = -1  # a node moves once
-            if (across >= 0).any():
+            if (across >= 0).any() and round < SPLIT_ROUNDS - 1:  # the last round finishes as it is
                 moved |= across >= 0
                 nodes = replace(nodes, entity=np.where(across >= 0, across, nodes.entity))
                 continue  # the patches on both sides again
@@ -168,7 +168,15 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             break
         nodes = _split_chain_edges(nodes, features, chains, missed)
     else:
-        raise RuntimeError(f"{len(missed)} feature-curve edges still missing from the surface triangulation")
+        where = nodes.points[missed].mean(axis=1)
+        first = where[np.argmin(np.linalg.norm(where - where.mean(axis=0), axis=1))]
+        ends = missed.ravel()
+        on_curves = np.unique(nodes.entity[ends[nodes.level[ends] == CURVE]])
+        curves = ", ".join(describe(features.curves[c]) for c in on_curves[:3])
+        raise RuntimeError(
+            f"{len(missed)} feature-curve edges still missing from the surface triangulation, around "
+            f"({coordinates(first, np.abs(first).max())}) on {curves or 'corners'}"
+        )
     triangles = np.concatenate(triangles).astype(np.int64) if triangles else np.zeros((0, 3), np.int64)
     check_closed(triangles)
     return BoundaryTriangulation(
