@@ -74,6 +74,11 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
     return chains
 
 
+def chain_edges(chain: np.ndarray, closed: bool) -> np.ndarray:
+    """(k, 2) consecutive node pairs of a curve's chain, the closing pair too when the curve is closed."""
+    return np.column_stack([chain, np.roll(chain, -1)]) if closed else np.column_stack([chain[:-1], chain[1:]])
+
+
 def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
     """(patch on the left, patch on the right) of every surface curve, seen from outside along it."""
     faces = geometry.mesh.faces
@@ -200,11 +205,7 @@ def _across_smooth_cuts(nodes, features, chains, sides, used) -> np.ndarray:
         return across
     ends, curve = [], []
     for index, chain in chains.items():
-        pairs = (
-            np.column_stack([chain, np.roll(chain, -1)])
-            if features.curves[index].closed
-            else np.column_stack([chain[:-1], chain[1:]])
-        )
+        pairs = chain_edges(chain, features.curves[index].closed)
         ends.append(pairs)
         curve.append(np.full(len(pairs), index))
     if not ends:
@@ -233,11 +234,7 @@ def _border_edges(p, chains, sides, features) -> np.ndarray:
         left, right = sides[index]
         if p not in (left, right) or len(chain) < 2:
             continue
-        pairs = (
-            np.column_stack([chain, np.roll(chain, -1)])
-            if features.curves[index].closed
-            else np.column_stack([chain[:-1], chain[1:]])
-        )
+        pairs = chain_edges(chain, features.curves[index].closed)
         if p == left:
             edges.append(pairs)
         if p == right:
@@ -252,9 +249,7 @@ def _coarse_chain_edges(nodes, features, chains) -> np.ndarray:
         curve = features.curves[index]
         if len(chain) < 2:
             continue
-        ends = (
-            np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
-        )
+        ends = chain_edges(chain, curve.closed)
         s = curve.parameter(nodes.points[chain])
         knots = curve.arc_length[1:-1]  # the curve's own vertices between its ends
         if curve.closed:  # the closing edge runs past the end, to the first node one turn on
@@ -281,9 +276,7 @@ def _split_chain_edges(nodes, features, chains, pairs):
     points, entity, radius = [], [], []
     for index, chain in chains.items():
         curve = features.curves[index]
-        ends = (
-            np.column_stack([chain, np.roll(chain, -1)]) if curve.closed else np.column_stack([chain[:-1], chain[1:]])
-        )
+        ends = chain_edges(chain, curve.closed)
         hit = np.array([tuple(sorted(pair)) in wanted for pair in ends.tolist()], dtype=bool)
         if not hit.any():
             continue
