@@ -191,6 +191,9 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
     packer = values["packer"]
     if output["elements"] == "hex-dominant" and "packer" not in data:
         packer = "grid"  # nodes on a grid aligned with the solid's frame (engine/packing/grid.py)
+    mesher = values["mesher"]
+    if output["elements"] == "hex-dominant" and "mesher" not in data:
+        mesher = "hex-core"  # the grid's boxes kept as hexahedra (engine/meshing/hexcore.py)
     base_dir = Path(base_dir)
     return Job(
         source=source,
@@ -207,7 +210,7 @@ def job_from_dict(data, base_dir: str | Path = ".", source: str = "<dict>") -> J
         placements=load_placements(data["place"], data.where("place"), "job", "job/place") if "place" in data else [],
         knowledge=[base_dir / k for k in values["knowledge"]],
         packer=packer,
-        mesher=values["mesher"],
+        mesher=mesher,
         seed=values["seed"],
         output_dir=base_dir / output["directory"],
         output_name=output["name"],

@@ -36,6 +36,7 @@ from .mesh import FACES, signed_volumes
 
 CORNER_COSINE = 0.5  # |cos| of the angle between two of a candidate corner's edges (60-120 deg)
 PLANAR = 1e-9  # a boundary quad's warp (6 x the volume of its four nodes) over its diagonal cubed
+REGULAR = 0.9  # cells of scaled Jacobian above this are chosen first (a lattice's boxes)
 MAX_TETS = 16  # tets in one candidate at most (5-7 in practice)
 HEX, PRISM, PYRAMID, TET = 0, 1, 2, 3
 CELL_TYPES = ("hexahedron", "wedge", "pyramid", "tetra")
@@ -464,17 +465,26 @@ def recombine(points: np.ndarray, tets: np.ndarray, min_quality: float = 0.2, pr
     kinds = [(HEX, HEX_CORNERS, HEX_FACES)] + ([(PRISM, PRISM_CORNERS, PRISM_FACES)] if prisms else [])
     chosen, found = {}, {}
     free = np.ones(m, bool)
+    reserved = np.zeros(m, bool)  # the pyramids the chosen cells' open quads will need
     for kind, corners, faces in kinds:
         t0 = time.perf_counter()
         generate = _hex_candidates if kind == HEX else _prism_candidates
         candidates = generate(points, start, adjacency, CORNER_COSINE)
         quality, members = _fill(
-            candidates, tets, free, node_start, node_tets, faces, corners, SCALE[kind], points, min_quality
+            candidates, tets, free & ~reserved, node_start, node_tets, faces, corners, SCALE[kind], points, min_quality
         )
-        keep, members = _select(quality, members, candidates, faces, free, tets)
-        chosen[kind] = (candidates[keep], members[keep], quality[keep])
-        used = members[keep].ravel()
-        free[used[used >= 0]] = False
+        keep = np.zeros(len(candidates), bool)
+        # in tiers: the near-regular cells first, then the pyramids on their open quads are kept from the rest
+        for tier in (REGULAR, min_quality):
+            later = quality < tier
+            tier_quality = np.where(later | keep, -np.inf, quality)
+            tier_keep, tier_members = _select(tier_quality, members, candidates, faces, free & ~reserved, tets)
+            members[tier_keep] = tier_members[tier_keep]
+            keep |= tier_keep
+            chosen[kind] = (candidates[keep], members[keep], quality[keep])
+            used = members[keep].ravel()
+            free[used[used >= 0]] = False
+            reserved |= _pyramid_tets(points, tets, opposite, chosen, min_quality)
         found[CELL_TYPES[kind]] = {
             "candidates": len(candidates),
             "valid": int(np.isfinite(quality).sum()),
@@ -491,6 +501,39 @@ def recombine(points: np.ndarray, tets: np.ndarray, min_quality: float = 0.2, pr
         "seconds": {k: round(v, 3) for k, v in seconds.items()},
     }
     return mixed
+
+
+def _pyramid_tets(points, tets, opposite, chosen, floor) -> np.ndarray:
+    """(m,) the tets that make valid pyramids on the quads of the ``chosen`` cells that no other chosen cell
+    shares: the two tets behind such a quad, sharing their fourth node."""
+    m = len(tets)
+    owner_kind, owner = np.full(m, -1, np.int64), np.full(m, -1, np.int64)
+    quad_cell, quad_kind, quad_nodes = [], [], []
+    for kind, (nodes, members, _) in chosen.items():
+        rows = np.repeat(np.arange(len(members)), MAX_TETS).reshape(members.shape)
+        owner_kind[members[members >= 0]] = kind
+        owner[members[members >= 0]] = rows[members >= 0]
+        cell, quads = _quads(nodes, CELL_FACES[kind])
+        quad_cell.append(cell)
+        quad_kind.append(np.full(len(cell), kind))
+        quad_nodes.append(quads)
+    out = np.zeros(m, bool)
+    quad_cell, quad_kind = np.concatenate(quad_cell), np.concatenate(quad_kind)
+    quad_nodes = np.concatenate(quad_nodes).reshape(-1, 4)
+    if len(quad_cell) == 0:
+        return out
+    _, inverse, counts = np.unique(np.sort(quad_nodes, axis=1), axis=0, return_inverse=True, return_counts=True)
+    single = counts[inverse.ravel()] == 1
+    behind = _behind(tets, opposite, owner_kind, owner, quad_kind, quad_cell, quad_nodes, single)
+    t1, t2 = behind[:, 0], behind[:, 1]
+    idx = np.flatnonzero(single & (t1 >= 0) & (t2 >= 0) & (t1 != t2))
+    idx = idx[(owner_kind[t1[idx]] == -1) & (owner_kind[t2[idx]] == -1)]
+    apex = _fourth(tets[t1[idx]], quad_nodes[idx])
+    same = (apex == _fourth(tets[t2[idx]], quad_nodes[idx])) & (apex >= 0)
+    idx, apex = idx[same], apex[same]
+    good = cell_qualities(points, np.column_stack([quad_nodes[idx], apex]), PYRAMID) >= floor
+    out[t1[idx[good]]] = out[t2[idx[good]]] = True
+    return out
 
 
 def _largest(members: np.ndarray, tet_volume: np.ndarray) -> np.ndarray:
@@ -575,10 +618,10 @@ def _conform(points, tets, opposite, chosen, tet_volume, floor):
             ok[idx] = cell_qualities(points, np.column_stack([quad_nodes[idx], apex[idx]]), PYRAMID) >= floor
         request = np.flatnonzero(ok)  # a tet in two pyramids: the better cell's quad keeps it
         order = request[np.argsort(-quad_quality[request], kind="stable")]
-        claimed = np.concatenate([t1[order], t2[order]])
+        claimed = np.column_stack([t1[order], t2[order]]).ravel()  # in the quads' order, both tets of each
         firsts = np.zeros(len(claimed), bool)
         firsts[np.unique(claimed, return_index=True)[1]] = True
-        ok[order[~(firsts[: len(order)] & firsts[len(order) :])]] = False
+        ok[order[~firsts.reshape(-1, 2).all(axis=1)]] = False
         bad = need & ~ok
         if not bad.any():
             break

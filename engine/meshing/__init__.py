@@ -17,7 +17,9 @@ from __future__ import annotations
 from ..plugins import Mesher
 from ..registry import Registry
 
-MESHERS = Registry("fuzzymesh.meshers", ["engine.meshing.delaunay", "engine.meshing.qhull"], Mesher)
+MESHERS = Registry(
+    "fuzzymesh.meshers", ["engine.meshing.delaunay", "engine.meshing.qhull", "engine.meshing.hexcore"], Mesher
+)
 register_mesher = MESHERS.register
 get_mesher = MESHERS.get
 mesher_names = MESHERS.names

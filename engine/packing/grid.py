@@ -31,6 +31,7 @@ from .start import CANDIDATES_PER_H2, SPACING_SLACK, SURFACE_EXCLUSION, _subdivi
 ALIGNED = np.cos(np.radians(6.0))  # a normal within 6 deg of a frame axis is aligned with it
 GRID_EXCLUSION = 0.45  # x h kept free between grid nodes and the boundary nodes (a boundary layer of >= 0.5 s)
 GRID_JITTER = 1e-4  # x h: the grid nodes' random offsets, so that Delaunay meets no eight co-spherical nodes
+THIN = 0.6  # x h: volume nodes closer than this are thinned (two octree levels side by side)
 CURVE_EXCLUSION = 0.5  # x h kept free between projected grid nodes and the curve and corner nodes
 
 
@@ -56,10 +57,13 @@ def direction_frame(features) -> np.ndarray:
 
 
 def _octree_centres(lo, hi, sizing, frame):
-    """(centres (k, 3) in frame coordinates, cell size (k,)): the octree cells whose size matches h."""
+    """(centres (k, 3) in frame coordinates, cell size (k,), the root cells' corner (3,) and size): the octree
+    cells whose size matches h. A cell of level l (size ``size / 2**l``) has its centre at
+    ``origin + (i + 1/2) size / 2**l`` on each axis: the levels' coordinates are disjoint sets."""
     size = sizing.h_max * SPACING_SLACK * (1 - 1e-9)
     counts = np.maximum(1, np.ceil((hi - lo) / size)).astype(int)
     lo = 0.5 * (lo + hi) - 0.5 * counts * size  # centred on the solid's box
+    origin, root = lo.copy(), size
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
@@ -70,7 +74,7 @@ def _octree_centres(lo, hi, sizing, frame):
         sizes.append(np.full(int(done.sum()), size))
         size /= 2
         centres = (centres[~done][:, None, :] + 0.5 * size * octants[None]).reshape(-1, 3)
-    return np.concatenate(out), np.concatenate(sizes)
+    return np.concatenate(out), np.concatenate(sizes), origin, root
 
 
 def _on_faces(points, vertices, faces, tolerance) -> np.ndarray:
@@ -109,7 +113,7 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     frame = direction_frame(features)
     vertices = np.asarray(geometry.mesh.vertices, float)
     local = vertices @ frame.T
-    centres, cell = _octree_centres(local.min(axis=0), local.max(axis=0), sizing, frame)
+    centres, cell, origin, root = _octree_centres(local.min(axis=0), local.max(axis=0), sizing, frame)
     tolerance = 1e-6 * geometry.scale
     parts = [corner_nodes(features, sizing)]
     # straight curves along an axis: the grid's columns projected onto them; the others as the start has them
@@ -152,7 +156,9 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
             continue
         aligned[index] = True
         level = float(np.mean(patch.vertices @ frame[axis]))
-        near = np.abs(centres[:, axis] - level) < 0.5 * cell
+        inward = -np.sign(frame[axis] @ n)  # from the plane into the solid, along the axis
+        depth = (centres[:, axis] - level) * inward
+        near = (depth > 0) & (depth <= cell)  # the nearest layer inside: the columns the boxes under it follow
         on = centres[near].copy()
         on[:, axis] = level
         world = on @ frame
@@ -188,7 +194,8 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     inside = geometry.contains(world)
     world = world[inside]
     h = sizing(world)
-    keep = thin(world, 0.7 * h, rng)  # only where octree levels meet: a level's own spacing is >= 0.79 h
+    # only where octree levels meet: a level's own spacing s is > 0.63 h (its parent, 2 s, was > 1.26 h)
+    keep = thin(world, THIN * h, rng)
     world, h = world[keep], h[keep]
     parts.append(
         Packing(points=world, level=np.full(len(world), VOLUME, np.int8), entity=np.full(len(world), -1), radius=h / 2)
@@ -201,6 +208,9 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
             **{f"{name}_nodes": int((packing.level == k).sum()) for k, name in enumerate(LEVELS)},
             "aligned_patches": int(aligned.sum()),
             "frame": np.round(frame, 6).tolist(),
+            # the lattice, for the hex-core mesher (engine/meshing/hexcore.py): frame rows, the root cells'
+            # corner in frame coordinates and their size (module docstring of _octree_centres)
+            "grid": {"frame": frame.tolist(), "origin": origin.tolist(), "size": float(root)},
         },
     )
 
