@@ -53,7 +53,10 @@ MAX_EDGE = 1.75  # x the larger h of its two nodes: a box edge longer than this 
 MIN_ASPECT = 0.2  # a box's shortest edge over its longest
 APEX_HEIGHT = 0.5  # x the face's mean edge: a pyramid's height
 APEX_MIN = 0.2  # x the face's mean edge: the lowest pyramid (where the surface is near)
-APEX_CLEARANCE = 0.45  # a pyramid's height at most this x the distance from its face's centre to the surface
+APEX_CLEARANCE = 0.45  # a pyramid's height at most this x the distance from its face's centre to the nearest
+# node in front of it (not of the core); CLEARANCE_NODES nearest nodes are looked at
+CLEARANCE_NODES = 12
+APEX_SURFACE = 0.1  # x the face's mean edge: an apex at least this far from the surface
 APEX_MERGE = 0.35  # x the face's mean edge: apexes closer than this merge
 PYRAMID_FLOOR = 0.3  # the scaled Jacobian a core pyramid must reach (the gate asks 0.2)
 NODE_CLEARANCE = 0.6  # x the face's mean edge: volume nodes of the layer this near an apex are left out
@@ -296,11 +299,11 @@ class _Core:
         edge = np.linalg.norm(corner - np.roll(corner, 1, axis=1), axis=2).mean(axis=1)
         normal = np.cross(corner[:, 2] - corner[:, 0], corner[:, 3] - corner[:, 1])
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-        _, distance, _ = self.geometry.closest_point(centre)
-        height = np.minimum(APEX_HEIGHT * edge, APEX_CLEARANCE * distance)
+        height = np.minimum(APEX_HEIGHT * edge, APEX_CLEARANCE * self._clearance(centre, normal, edge))
         bad = height < APEX_MIN * edge
         apex = centre + height[:, None] * normal
-        bad |= ~self.geometry.contains(apex)
+        _, distance, _ = self.geometry.closest_point(apex)
+        bad |= ~self.geometry.contains(apex) | (distance < APEX_SURFACE * edge)
         # merge apexes closer than APEX_MERGE x the edge
         label = _clusters(apex, APEX_MERGE * edge)
         merged = np.zeros((label.max() + 1 if len(label) else 0, 3))
@@ -323,6 +326,19 @@ class _Core:
         self.apexes, self.pyramids, self.crowded = merged, pyramids, crowded
         self.pyramid_box = box[open_]
         return False
+
+    def _clearance(self, centre, normal, edge):
+        """(f,) the distance from each open face's centre to the nearest node in front of it (not of the core)."""
+        in_core = np.zeros(len(self.points), bool)
+        in_core[self.boxes.ravel()] = True
+        idx = np.flatnonzero(self.keep & ~in_core)
+        out = np.full(len(centre), np.inf)
+        if len(idx) == 0:
+            return out
+        distance, near = cKDTree(self.points[idx]).query(centre, k=min(CLEARANCE_NODES, len(idx)))
+        distance, near = distance.reshape(len(centre), -1), near.reshape(len(centre), -1)
+        ahead = np.einsum("fkj,fj->fk", self.points[idx[near]] - centre[:, None], normal) > 0.05 * edge[:, None]
+        return np.where(ahead, distance, np.inf).min(axis=1)
 
     def _in_pyramids(self, work, pyramids, edge):
         """(volume nodes to leave out, pyramids that hold or crowd another kind of node)."""
