@@ -60,6 +60,7 @@ APEX_SURFACE = 0.1  # x the face's mean edge: an apex at least this far from the
 APEX_MERGE = 0.35  # x the face's mean edge: apexes closer than this merge
 PYRAMID_FLOOR = 0.3  # the scaled Jacobian a core pyramid must reach (the gate asks 0.2)
 NODE_CLEARANCE = 0.6  # x the face's mean edge: volume nodes of the layer this near an apex are left out
+LAYER_FLOOR = 8.0  # deg: a layer tet below this after the improvement takes the boxes at its nodes out of the core
 CORE_ROUNDS = 60  # rounds of dropping the boxes whose pyramids do not fit
 # the box's corners: 0 low, 1 +x, 2 +x+y, 3 +y, 4 +z, 5 +x+z, 6 +x+y+z, 7 +y+z (VTK's hexahedron order)
 KUHN_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 1, 5, 6], [0, 4, 5, 6], [0, 3, 7, 6], [0, 4, 7, 6]])
@@ -114,28 +115,30 @@ def _mesh(packing, geometry, features, seed, lattice):
     boxes = _boxes(local, keep, h, geometry.scale)
     boxes = boxes[_empty(local, boxes, keep)]
     core = _Core(points, local, boxes, triangles, nodes.level, keep, geometry)
-    rounds = 0
+    rounds, seconds["core"], seconds["layer"] = 0, 0.0, 0.0
     while True:
-        while core.settle():
-            rounds += 1
-            if rounds == CORE_ROUNDS or len(core.boxes) == 0:
-                raise _NoCore(f"the core did not settle in {rounds} rounds ({len(core.boxes)} boxes left)")
-        if len(core.boxes) == 0:
-            raise _NoCore("no lattice box fits in the solid")
+        rounds = _settle(core, points, rounds)
+        seconds["core"] += time.perf_counter() - start
+        start = time.perf_counter()
         triangles = core.flipped_triangles()
-        layer_boundary, owner = core.layer_boundary(triangles)
-        crossing = _crossing(np.vstack([points, core.apexes]), layer_boundary)
-        crossing = crossing[owner[crossing] >= 0]  # a pyramid's side crosses the surface or another pyramid
-        if len(crossing) == 0:
+        layer_boundary, _ = core.layer_boundary(triangles)
+        all_points = np.vstack([points, core.apexes])
+        free = keep & (nodes.level == VOLUME)
+        free[core.boxes.ravel()] = False
+        free[core.crowded] = False
+        free = np.concatenate([free, np.zeros(len(core.apexes), bool)])
+        layer_tets, layer_points, steiner = _layer(all_points, layer_boundary, free, seed)
+        seconds["layer"] += time.perf_counter() - start
+        start = time.perf_counter()
+        # a layer tet still below LAYER_FLOOR: the boxes and pyramids at its nodes leave the core
+        worst = min_dihedrals(layer_points, layer_tets) if len(layer_tets) else np.zeros(0)
+        bad = np.unique(layer_tets[worst < LAYER_FLOOR])
+        drop = np.flatnonzero(np.isin(core.boxes, bad).any(axis=1))
+        drop = np.union1d(drop, core.pyramid_box[np.isin(core.pyramids[:, 4], bad)])
+        if len(drop) == 0 or rounds >= CORE_ROUNDS:
             break
-        core.drop(np.unique(core.pyramid_box[owner[crossing]]))
+        core.drop(drop)
         rounds += 1
-        if rounds >= CORE_ROUNDS:
-            raise _NoCore(f"the core's pyramids still cross after {rounds} rounds")
-    seconds["core"] = time.perf_counter() - start
-
-    start = time.perf_counter()
-    all_points = np.vstack([points, core.apexes])
     n0 = len(points)
     level = np.concatenate([nodes.level, np.full(len(core.apexes), STEINER)]).astype(np.int8)
     entity = np.concatenate([nodes.entity, np.full(len(core.apexes), -1)]).astype(np.int64)
@@ -145,12 +148,6 @@ def _mesh(packing, geometry, features, seed, lattice):
     box_tets = core.boxes[:, KUHN_TETS].reshape(-1, 4)
     pyramid_tets = core.pyramid_tets()
     fixed_tets = orient(all_points, np.vstack([box_tets, pyramid_tets]))[0]
-    free = keep & (nodes.level == VOLUME)
-    free[core.boxes.ravel()] = False
-    free[core.crowded] = False
-    free = np.concatenate([free, np.zeros(len(core.apexes), bool)])
-    layer_tets, layer_points, steiner = _layer(all_points, layer_boundary, free, seed)
-    seconds["layer"] = time.perf_counter() - start
 
     all_points = layer_points
     level = np.concatenate([level, np.full(steiner, STEINER)]).astype(np.int8)
@@ -187,6 +184,26 @@ def _mesh(packing, geometry, features, seed, lattice):
         boundary_patch=surface.patch[order],
         node_bubble=bubble,
     )
+
+
+def _settle(core, points, rounds) -> int:
+    """Drop boxes until every pyramid fits and none crosses the surface or another (module docstring, 3)."""
+    while True:
+        while core.settle():
+            rounds += 1
+            if rounds == CORE_ROUNDS or len(core.boxes) == 0:
+                raise _NoCore(f"the core did not settle in {rounds} rounds ({len(core.boxes)} boxes left)")
+        if len(core.boxes) == 0:
+            raise _NoCore("no lattice box fits in the solid")
+        layer_boundary, owner = core.layer_boundary(core.flipped_triangles())
+        crossing = _crossing(np.vstack([points, core.apexes]), layer_boundary)
+        crossing = crossing[owner[crossing] >= 0]  # a pyramid's side crosses the surface or another pyramid
+        if len(crossing) == 0:
+            return rounds
+        core.drop(np.unique(core.pyramid_box[owner[crossing]]))
+        rounds += 1
+        if rounds >= CORE_ROUNDS:
+            raise _NoCore(f"the core's pyramids still cross after {rounds} rounds")
 
 
 def _snap(local, origin, root):

@@ -31,6 +31,7 @@ from .start import CANDIDATES_PER_H2, SPACING_SLACK, SURFACE_EXCLUSION, _subdivi
 ALIGNED = np.cos(np.radians(6.0))  # a normal within 6 deg of a frame axis is aligned with it
 GRID_EXCLUSION = 0.45  # x h kept free between grid nodes and the boundary nodes (a boundary layer of >= 0.5 s)
 GRID_JITTER = 1e-4  # x h: the grid nodes' random offsets, so that Delaunay meets no eight co-spherical nodes
+EDGE_EXCLUSION = 0.75  # x h kept free between grid nodes and the curve and corner nodes (> CURVE_EXCLUSION x 2^0.5)
 THIN = 0.6  # x h: volume nodes closer than this are thinned (two octree levels side by side)
 CURVE_EXCLUSION = 0.5  # x h kept free between projected grid nodes and the curve and corner nodes
 
@@ -144,6 +145,7 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     )
     parts += [curved, straight_nodes]
     boundary = Packing.concatenate(parts)
+    edges = boundary.points  # the corner and curve nodes
     # planar patches at right angles to an axis: the grid's rows projected onto them
     aligned = np.zeros(len(features.patches), bool)
     projected, owner = [], []
@@ -189,7 +191,10 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     world = world[inside]
     h = sizing(world)
     gap, _ = cKDTree(boundary.points).query(world)
-    world, h = world[gap >= GRID_EXCLUSION * h], h[gap >= GRID_EXCLUSION * h]
+    # near an edge, the rows that would join a node to both planes are gone (CURVE_EXCLUSION): so is the node
+    to_edge = cKDTree(edges).query(world)[0] if len(edges) else np.full(len(world), np.inf)
+    away = (gap >= GRID_EXCLUSION * h) & (to_edge >= EDGE_EXCLUSION * h)
+    world, h = world[away], h[away]
     world += rng.uniform(-GRID_JITTER, GRID_JITTER, world.shape) * h[:, None]  # no co-spherical eights
     inside = geometry.contains(world)
     world = world[inside]
