@@ -64,7 +64,31 @@ MATERIAL = Material(E=200e3, nu=0.3)
 TENSION = 100.0
 PRESSURE = 100.0
 SAMPLES = 101  # heights along a root line for the through-thickness mean
-HOLE = dict(near=0.125, far=1.0, extent=3.0)  # patterns/hole.yaml defaults (times the radius)
+KNOWLEDGE = ROOT / "knowledge"
+PATTERNS = ROOT / "patterns"
+RECIPE = "static-stress"
+# How the recipe series scales a pattern's parameters by s so that every size it asks for is s times its own:
+# sizes multiply, counts ('elements through', 'per circle') divide, a tolerance on h^2 (curvature's
+# volume_change) multiplies by s^2; sizes in units of H scale with the job's size.
+SCALED = {
+    "hole": {"near": 1, "far": 1},
+    "thin-wall": {"through": -1},
+    "narrow-gap": {"across": -1},
+    "curvature": {"per_circle": -1, "volume_change": 2},
+}
+
+
+def _yaml(path: Path) -> dict:
+    import yaml
+
+    return yaml.safe_load(path.read_text())
+
+
+def _defaults(pattern: str) -> dict:
+    return {k: v["default"] for k, v in _yaml(PATTERNS / f"{pattern}.yaml").get("parameters", {}).items()}
+
+
+HOLE = {k: _defaults("hole")[k] for k in ("near", "far", "extent")}  # patterns/hole.yaml (times the radius)
 REFERENCE_FILE = Path(__file__).with_name("fe_reference.json")
 
 
@@ -237,28 +261,54 @@ def solve_case(case: Case, model: FEModel) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- meshes
-def fuzzymesh_model(case: Case, series: str, scale: float, seed: int) -> FEModel:
+def recipe_placements(case: Case, scale: float) -> list[dict]:
+    """The shipped recipe's placements and the always-placed rules of knowledge/sizing.yaml, every size they ask
+    for times ``scale`` (SCALED); the hole pattern's near / far / extent from case.hole (the YAML's unless a
+    variant sets them)."""
+    place = [dict(p) for p in _yaml(KNOWLEDGE / "recipes" / f"{RECIPE}.yaml")["place"]]
+    placed = {p["pattern"] for p in place}
+    place += [
+        {"pattern": p["pattern"]}
+        for p in _yaml(KNOWLEDGE / "sizing.yaml")["always_place"]
+        if p["pattern"] not in placed
+    ]
+    out = []
+    for p in place:
+        parameters = {**_defaults(p["pattern"]), **p.get("parameters", {})}
+        if p["pattern"] == "hole":
+            parameters.update(case.hole)
+        for key, power in SCALED.get(p["pattern"], {}).items():
+            parameters[key] = parameters[key] * scale**power
+        out.append({k: v for k, v in {**p, "parameters": parameters}.items() if k != "id"})
+    return out
+
+
+def scaled_sizing(scale: float, fixed_gradation: bool = False) -> Path:
+    """knowledge/sizing.yaml with the gradation limit scaled with the sizes: h(y) <= h(x) + (g - 1)|x - y| holds
+    for s h with (g - 1) s, so the recipe series at scale s is exactly s times the recipe's graded field (as the
+    Gmsh series is s times its Threshold field); ``fixed_gradation`` keeps the shipped g at every scale."""
+    import tempfile
+
+    import yaml
+
+    sizing = _yaml(KNOWLEDGE / "sizing.yaml")
+    if not fixed_gradation:
+        sizing["gradation"] = min(3.0, round(1 + (sizing["gradation"] - 1) * scale, 6))
+    sizing["always_place"] = []  # the recipe series places them itself, scaled
+    path = Path(tempfile.gettempdir()) / f"fe_study_sizing_{sizing['gradation']:g}.yaml"
+    path.write_text(yaml.safe_dump(sizing))
+    return path
+
+
+def fuzzymesh_model(case: Case, series: str, scale: float, seed: int, fixed_gradation: bool = False) -> FEModel:
     data = {
         "geometry": {"shape": case.shape, "parameters": dict(case.parameters)},
         "seed": seed,
         "size": scale * case.H,
     }
     if series == "recipe":
-        h = case.hole
-        place = [{"pattern": "uniform-domain"}]
-        if case.kind == "plate":
-            place.append(
-                {
-                    "pattern": "hole",
-                    "every": "hole",
-                    "parameters": {"near": h["near"] * scale, "far": h["far"] * scale, "extent": h["extent"]},
-                }
-            )
-        place += [
-            {"pattern": "thin-wall", "parameters": {"through": 2.0 / scale}},
-            {"pattern": "curvature", "parameters": {"per_circle": 24.0 / scale}},
-        ]
-        data["place"] = place
+        data["knowledge"] = [str(scaled_sizing(scale, fixed_gradation))]
+        data["place"] = [p for p in recipe_placements(case, scale) if case.kind == "plate" or p["pattern"] != "hole"]
     else:
         data["knowledge"] = [str(STUDY_SIZING)]
         data["place"] = [{"pattern": "uniform-domain"}]
@@ -273,7 +323,9 @@ GMSH_TO_VTK = [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]  # gmsh tet10: edges 01 12 20 30 32
 def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
     import gmsh
 
-    gmsh.initialize(interruptible=False)
+    if gmsh.isInitialized():  # fuzzymesh's mesher leaves its session (HXT, optimiser options) open: start afresh
+        gmsh.finalize()
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)
@@ -339,9 +391,12 @@ def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
     return FEModel(points, tets10, len(vertex))
 
 
-def measure(case: Case, series: str, scale: float, seed: int = 0) -> dict:
+def measure(case: Case, series: str, scale: float, seed: int = 0, fixed_gradation: bool = False) -> dict:
     start = time.perf_counter()
-    model = gmsh_model(case, scale, seed) if series == "gmsh" else fuzzymesh_model(case, series, scale, seed)
+    if series == "gmsh":
+        model = gmsh_model(case, scale, seed)
+    else:
+        model = fuzzymesh_model(case, series, scale, seed, fixed_gradation)
     meshed = time.perf_counter() - start
     solved = solve_case(case, model)
     return {
@@ -438,8 +493,11 @@ def markdown(study: dict) -> str:
         "",
         "Made by `python bench/fe_study.py` (see its docstring and docs/validation.md). One solver for all "
         "three series (10-node tets, scikit-fem, CG + AMG, averaged nodal stresses). Node counts are the "
-        "linear mesh's vertices. Seeds: " + ", ".join(map(str, study["seeds"])) + " for fuzzymesh "
-        "(means over the seeds), one Gmsh mesh per scale.",
+        "linear mesh's vertices. Seeds: "
+        + ", ".join(map(str, study["seeds"]))
+        + " for fuzzymesh, "
+        + ", ".join(map(str, study.get("gmsh_seeds", [0])))
+        + " for Gmsh (its Mesh.RandomSeed; means over the seeds).",
         "",
         "## Nodes from which the error of every seed stays within 1 % and 3 %",
         "",
@@ -523,8 +581,16 @@ def main(argv=None) -> None:
         default=Path(__file__).with_name("fe_study_rows.jsonl"),
         help="every measured mesh appended here (resumable)",
     )
+    parser.add_argument(
+        "--fixed-gradation",
+        action="store_true",
+        help="the recipe series keeps the shipped gradation at every scale (not s times the recipe's field)",
+    )
     parser.add_argument("--tag", default="shipped", help="label of this run's rows (e.g. a tuned variant)")
     parser.add_argument("--out", type=Path, default=None, help="write OUT.json / OUT.md from the rows of --tag")
+    parser.add_argument(
+        "--compare-tag", default=None, help="with --out: the series --tag has no rows of (gmsh, uniform) from this tag"
+    )
     args = parser.parse_args(argv)
     stored = json.loads(REFERENCE_FILE.read_text()) if REFERENCE_FILE.exists() else {}
     if args.reference:
@@ -559,28 +625,33 @@ def main(argv=None) -> None:
                 case.hole[key] = getattr(args, key)
         for series in args.series:
             for scale in scales[series]:
-                for seed in args.seeds if series != "gmsh" else [0]:
+                for seed in args.seeds:
                     try:
-                        row = measure(case, series, scale, seed)
+                        row = measure(case, series, scale, seed, args.fixed_gradation)
                     except Exception as error:  # a refused or failed mesh is a data point too
                         row = {"case": name, "series": series, "scale": scale, "seed": seed, "failed": str(error)[:200]}
                     row["tag"] = args.tag
                     row["hole"] = dict(case.hole)
+                    row["gradation"] = "fixed" if args.fixed_gradation else "scaled"
                     with args.rows.open("a") as f:
                         f.write(json.dumps(row) + "\n")
                     print(json.dumps(row), flush=True)
     if args.out:
-        write(args.rows, args.tag, args.out, stored)
+        write(args.rows, args.tag, args.out, stored, args.compare_tag)
 
 
-def write(rows_path: Path, tag: str, out: Path, stored: dict) -> None:
-    rows = [json.loads(line) for line in rows_path.read_text().splitlines() if line.strip()]
-    rows = [r for r in rows if r.get("tag") == tag]
+def write(rows_path: Path, tag: str, out: Path, stored: dict, compare_tag: str | None = None) -> None:
+    every = [json.loads(line) for line in rows_path.read_text().splitlines() if line.strip()]
+    rows = [r for r in every if r.get("tag") == tag]
+    if compare_tag:
+        own = {(r["case"], r["series"]) for r in rows}
+        rows += [r for r in every if r.get("tag") == compare_tag and (r["case"], r["series"]) not in own]
     failures = [r for r in rows if "failed" in r]
     rows = [r for r in rows if "failed" not in r]
     study = {
         "tag": tag,
         "seeds": sorted({r["seed"] for r in rows if r["series"] != "gmsh"}),
+        "gmsh_seeds": sorted({r["seed"] for r in rows if r["series"] == "gmsh"}),
         "references": stored,
         "summary": summarise(rows, stored, failures),
         "rows": rows,
