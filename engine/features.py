@@ -17,6 +17,7 @@ import igl
 import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
 
 from .errors import GeometryError
 from .geometry import Geometry
@@ -240,6 +241,9 @@ WIDE = 3.0  # a coplanar region this many times wider than the facets it bends i
 MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
 SEED_BAND = 0.25  # a halved piece's faces in this top and bottom share of their normals' spread stay apart
 SMOOTHING = 4  # rounds of neighbour averaging of the normals' spread before the seeds are chosen
+FOLD = 3.0  # a chart's border folds where it lays two border points this many times nearer than in space
+FOLD_SAMPLES = 4  # border points looked at per median border edge, ...
+MAX_FOLD_SAMPLES = 200_000  # ... and at most this many per chart
 
 
 def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray, source: str) -> list[np.ndarray]:
@@ -316,9 +320,11 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
     while todo:
         piece, depth = todo.pop()
         verts = mesh.vertices[np.unique(mesh.faces[piece])]
+        chart = _chart(mesh, piece) if len(piece) >= 2 else None
+        folds = border_folds(*chart) if chart is not None else None
         if (
             len(piece) < 2
-            or flattenable(mesh, piece)
+            or (folds is not None and len(folds[0]) == 0)
             or fit_cylinder(centres[piece], normals[piece], verts) is not None
         ):
             pieces.append(piece)
@@ -332,17 +338,23 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
                 fix="lower geometry.feature_angle so that feature curves cut it, or "
                 "re-export the surface with less noise",
             )
-        spread = normals[piece] - normals[piece].mean(axis=0)
-        along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
         local = np.full(len(mesh.faces), -1)
         local[piece] = np.arange(len(piece))
         inner = (local[pairs[:, 0]] >= 0) & (local[pairs[:, 1]] >= 0)
-        near = sparse.coo_matrix((np.ones(inner.sum()), tuple(local[pairs[inner]].T)), shape=(len(piece),) * 2)
-        near = (near + near.T).tocsr()
-        for _ in range(SMOOTHING):  # faceting noise (a quad's two triangles) must not interleave the seeds
-            along = (along + near @ along) / (1.0 + np.asarray(near.sum(axis=1)).ravel())
-        along = (along - along.min()) / max(np.ptp(along), 1e-300)
-        side = _min_cut(len(piece), local[pairs[inner]], length[inner], along > 1 - SEED_BAND, along < SEED_BAND)
+        if folds is not None:  # it flattens, but its border folds onto itself: the fold's two sides apart
+            source, sink = np.zeros(len(piece), bool), np.zeros(len(piece), bool)
+            source[folds[0]], sink[folds[1]] = True, True
+            source, sink = source & ~sink, sink & ~source
+        else:
+            spread = normals[piece] - normals[piece].mean(axis=0)
+            along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
+            near = sparse.coo_matrix((np.ones(inner.sum()), tuple(local[pairs[inner]].T)), shape=(len(piece),) * 2)
+            near = (near + near.T).tocsr()
+            for _ in range(SMOOTHING):  # faceting noise (a quad's two triangles) must not interleave the seeds
+                along = (along + near @ along) / (1.0 + np.asarray(near.sum(axis=1)).ravel())
+            along = (along - along.min()) / max(np.ptp(along), 1e-300)
+            source, sink = along > 1 - SEED_BAND, along < SEED_BAND
+        side = _min_cut(len(piece), local[pairs[inner]], length[inner], source, sink)
         for half in (piece[side], piece[~side]):
             labels = _components(len(mesh.faces), pairs[inner][np.isin(pairs[inner], half).all(axis=1)])
             todo += [(half[labels[half] == r], depth + 1) for r in np.unique(labels[half])]
@@ -383,16 +395,98 @@ def _min_cut(count: int, pairs: np.ndarray, length: np.ndarray, source: np.ndarr
 
 def flattenable(mesh, faces: np.ndarray) -> bool:
     """Whether a connected piece of surface maps to the plane without folding or much stretching: its
-    normals stay within CHART_CONE of their mean and its conformal map (:func:`conformal_map`) exists."""
+    normals stay within CHART_CONE of their mean, its conformal map (:func:`conformal_map`) exists and its
+    border does not fold onto itself there (:func:`border_folds`)."""
+    chart = _chart(mesh, faces)
+    return chart is not None and len(border_folds(*chart)[0]) == 0
+
+
+def _chart(mesh, faces: np.ndarray):
+    """(vertices (V, 3), triangles (F, 3) local to them, uv (V, 2)) of a connected piece whose normals stay
+    within CHART_CONE of their mean and whose conformal map exists; None otherwise."""
     normals, areas = mesh.face_normals[faces], mesh.area_faces[faces]
     mean = (normals * areas[:, None]).sum(axis=0)
     if np.linalg.norm(mean) < 1e-12:
-        return False
+        return None
     cone = np.degrees(np.arccos(np.clip((normals @ (mean / np.linalg.norm(mean))).min(), -1.0, 1.0)))
     if cone > CHART_CONE:
-        return False
+        return None
     used, local = np.unique(mesh.faces[faces], return_inverse=True)
-    return conformal_map(mesh.vertices[used], local.reshape(-1, 3)) is not None
+    vertices, triangles = mesh.vertices[used], local.reshape(-1, 3)
+    uv = conformal_map(vertices, triangles)
+    return None if uv is None else (vertices, triangles, uv)
+
+
+def border_folds(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles along the two sides of a fold of the chart ``uv``'s border (two arrays, empty when it
+    has none). A fold: border edges that the chart lays FOLD times nearer than their points lie in space
+    (beyond the chart's largest stretch). Of several, the one open widest in space; when one loop folds onto
+    itself, its border between the two edges counts, split at the fold's tip (where the border turns back
+    on itself). A patch wrapped round a zero-angle wedge of another folds so (a tangent fillet cut square
+    by a flange face: the fillet's edge and the cylinder's edge leave their common corner tangent, and the
+    unrolling lays both on one line); node chains along the two edges would cross in the chart, and no
+    triangulation there could keep both."""
+    loops = [np.asarray(loop) for loop in igl.boundary_loop_all(triangles)]
+    if not loops:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    start = np.concatenate(loops)
+    end = np.concatenate([np.roll(loop, -1) for loop in loops])
+    loop_of = np.repeat(np.arange(len(loops)), [len(loop) for loop in loops])
+    size = np.array([len(loop) for loop in loops])[loop_of]
+    position = np.concatenate([np.arange(len(loop)) for loop in loops])
+    span = np.linalg.norm(uv[end] - uv[start], axis=1)
+    step = max(np.median(span) / FOLD_SAMPLES, span.sum() / MAX_FOLD_SAMPLES, 1e-300)
+    count = np.maximum(1, np.ceil(span / step)).astype(np.int64)
+    edge = np.repeat(np.arange(len(start)), count)
+    t = ((np.arange(len(edge)) - np.repeat(np.cumsum(count) - count, count) + 0.5) / count[edge])[:, None]
+    sample_uv = uv[start[edge]] + t * (uv[end[edge]] - uv[start[edge]])
+    sample_xyz = vertices[start[edge]] + t * (vertices[end[edge]] - vertices[start[edge]])
+    near = cKDTree(sample_uv).query_pairs(step, output_type="ndarray")
+    a, b = edge[near[:, 0]], edge[near[:, 1]]
+    apart = (start[a] != start[b]) & (start[a] != end[b]) & (end[a] != start[b]) & (end[a] != end[b])
+    d_uv = np.linalg.norm(sample_uv[near[:, 0]] - sample_uv[near[:, 1]], axis=1)
+    d_xyz = np.linalg.norm(sample_xyz[near[:, 0]] - sample_xyz[near[:, 1]], axis=1)
+    tri = vertices[triangles]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    a_uv, b_uv, c_uv = (uv[triangles[:, i]] for i in range(3))
+    flat = 0.5 * np.abs(
+        (b_uv[:, 0] - a_uv[:, 0]) * (c_uv[:, 1] - a_uv[:, 1]) - (b_uv[:, 1] - a_uv[:, 1]) * (c_uv[:, 0] - a_uv[:, 0])
+    )
+    solid = area > 1e-12 * area.max()
+    stretch = np.sqrt(area[solid] / np.maximum(flat[solid], 1e-300)).max()  # space length per chart length
+    extent = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    fold = apart & (d_xyz > FOLD * stretch * d_uv) & (d_xyz > 1e-6 * extent)
+    if not fold.any():
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    widest = np.flatnonzero(fold)[np.argmax(d_xyz[fold])]  # one fold at a time: the one open widest in space
+    x, y = a[widest], b[widest]
+    if loop_of[x] == loop_of[y]:  # the border between them, the short way round, split at the fold's tip
+        if np.mod(position[y] - position[x], size[x]) > size[x] / 2:
+            x, y = y, x
+        steps = np.arange(np.mod(position[y] - position[x], size[x]) + 1)
+        run = (np.cumsum([0] + [len(loop) for loop in loops]))[loop_of[x]] + np.mod(position[x] + steps, size[x])
+        direction = uv[end[run]] - uv[start[run]]
+        back = -np.einsum("ij,ij->i", direction[:-1], direction[1:]) / np.maximum(
+            span[run[:-1]] * span[run[1:]], 1e-300
+        )
+        tip = int(np.argmax(back)) + 1 if len(run) > 1 else 1  # where the border turns back on itself
+        first, second = run[:tip], run[tip:]
+    else:  # two loops: every fold between the same two
+        between = fold & np.isin(loop_of[a], loop_of[[x, y]]) & np.isin(loop_of[b], loop_of[[x, y]])
+        ends = np.concatenate([a[between], b[between]])
+        first, second = ends[loop_of[ends] == loop_of[x]], ends[loop_of[ends] == loop_of[y]]
+    owner = _edge_owner(triangles, start, end)
+    return np.unique(owner[first]), np.unique(owner[second])
+
+
+def _edge_owner(triangles: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """The triangle holding each edge (start, end) (border edges: one each)."""
+    n = int(triangles.max()) + 1
+    ends = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
+    key = ends.min(axis=1) * n + ends.max(axis=1)
+    order = np.argsort(key, kind="stable")
+    at = np.searchsorted(key[order], np.minimum(start, end) * n + np.maximum(start, end))
+    return order[at] // 3
 
 
 def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:

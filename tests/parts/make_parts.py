@@ -326,6 +326,15 @@ def pillow_block() -> int:
     )
 
 
+def boss_arm() -> int:
+    """A bored boss (r 20, 22 high) carrying a drilled arm 12 thick whose sides meet the boss through
+    vertical fillets (r 3) that end square on the arm's top and bottom faces, as at a con-rod's big end: on
+    the boss, a fillet's end edge and the boss's edge leave their common corner tangent."""
+    body = _fuse(occ.addCylinder(0, 0, -11, 0, 0, 22, 20), occ.addBox(10, -8, -6, 60, 16, 12))
+    body = _fillet(body, _curves(lambda b: b[5] - b[2] > 11 and b[3] - b[0] < EPS and abs(b[0] - 18.33) < 0.1), 3)
+    return _cut(body, _hole(0, 0, -12, 12, 10), _hole(60, 0, -7, 7, 4))
+
+
 PARTS = {
     f.__name__: f
     for f in (
@@ -353,6 +362,7 @@ PARTS = {
         hex_nut,
         stepped_shaft,
         pillow_block,
+        boss_arm,
     )
 }
 
