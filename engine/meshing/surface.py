@@ -640,7 +640,9 @@ def _constraint_copies(edges, original, extended) -> np.ndarray:
 def _constrained_delaunay(uv, edges) -> np.ndarray:
     """Constrained Delaunay triangles (counter-clockwise) of ``uv`` with ``edges`` (k, 2) as edges, over the
     nodes' convex hull, by Triangle (libigl); Qhull's :func:`_delaunay` when constrained edges cross (Triangle
-    would add their crossings as nodes)."""
+    would add their crossings as nodes) or two nodes share a place (Triangle would crash)."""
+    if len(np.unique(uv, axis=0)) < len(uv):
+        return _delaunay(uv)
     points, tri = igl.triangle.triangulate(
         np.ascontiguousarray(uv, dtype=np.float64), np.ascontiguousarray(edges, dtype=np.int64), flags="pcQ"
     )[:2]

@@ -54,13 +54,15 @@ SKIN = 0.3  # a bubble that moved this x h since the last build is stale
 STALE_SHARE = 0.05  # rebuild the neighbour lists once this share of bubbles is stale
 REBUILD_EVERY = 50  # ... or after this many steps
 INSIDE_CHECK_EVERY = 5  # volume bubbles outside the solid go back to their last checked place
+END_GAP = 0.1  # a curve bubble nearer than this x its diameter to an end of its curve (a corner node) is dropped
 
 
 @dataclass(kw_only=True)
 class PackingRun:
     """What the levels of one packing share and add to: the solid, the bubble diameters (c h), the population
     rules in force, the seeded generator, the population-control events (EVENT blocks, one per round and
-    action), the next bubble id, and per level its start count, its starting places and its time."""
+    action), the next bubble id, per level its start count, its starting places and its time, and the curve
+    bubbles dropped for lying on a corner."""
 
     geometry: object
     bubbles: "_Scaled"
@@ -71,6 +73,7 @@ class PackingRun:
     initial_counts: dict = field(default_factory=dict)
     starts: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    dropped_at_curve_ends: int = 0
 
     def new_ids(self, count: int) -> np.ndarray:
         ids = np.arange(self.next_id, self.next_id + count)
@@ -172,6 +175,10 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
             frozen=frozen.points,
         )
         steps = _relax(state)
+        if level == CURVE:  # the projection onto a curve can leave a bubble pushed past its end on the corner
+            clear = _clear_of_ends(state.x, state.entity, features, run.bubbles(state.x))
+            run.dropped_at_curve_ends = int(np.count_nonzero(~clear))
+            state.x, state.entity, state.ids = state.x[clear], state.entity[clear], state.ids[clear]
         points = state.x
         parts.append(
             Packing(
@@ -193,6 +200,20 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
         )
     packing = Packing.concatenate(parts, events=np.concatenate([np.zeros(0, EVENT)] + run.events).view(np.recarray))
     return replace(packing, stats=_statistics(packing, sizing, run))
+
+
+def _clear_of_ends(points, entity, features, diameter) -> np.ndarray:
+    """(k,) whether each curve bubble lies more than END_GAP x its diameter from both ends of its open curve,
+    where corner nodes are (a bubble on a corner would give a chain edge of no length)."""
+    clear = np.ones(len(points), bool)
+    for key in np.unique(entity):
+        curve = features.curves[key]
+        if curve.closed:
+            continue
+        rows = np.flatnonzero(entity == key)
+        s, gap = curve.parameter(points[rows]), END_GAP * diameter[rows]
+        clear[rows] = (s > gap) & (s < curve.length - gap)
+    return clear
 
 
 def _initial(level, geometry, features, bubbles, frozen, rng, density):
@@ -395,6 +416,7 @@ def _statistics(packing: Packing, sizing, run: PackingRun) -> dict:
         "initial_nearest_over_r0": nearest_over_r0(initial_points, bubbles(initial_points)),
         "deleted": int(np.count_nonzero(events.action == "delete")),
         "inserted": int(np.count_nonzero(events.action == "insert")),
+        "dropped_at_curve_ends": run.dropped_at_curve_ends,
         "seconds": run.timings,
     }
 
