@@ -49,13 +49,14 @@ from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedraliz
 log = logging.getLogger(__name__)
 
 LATTICE_TOLERANCE = 2e-3  # x the level's cell: a coordinate this near a lattice value is on it (the grid's jitter)
-MAX_EDGE = 1.75  # x the larger h of its two nodes: a box edge longer than this jumps a gap in the lattice
+MAX_EDGE = 2.1  # x the larger h of its nodes: a longer box edge jumps a gap in the lattice (two layers removed)
 MIN_ASPECT = 0.2  # a box's shortest edge over its longest
 APEX_HEIGHT = 0.5  # x the face's mean edge: a pyramid's height
 APEX_MIN = 0.2  # x the face's mean edge: the lowest pyramid (where the surface is near)
 APEX_CLEARANCE = 0.45  # a pyramid's height at most this x the distance from its face's centre to the nearest
 # node in front of it (not of the core); CLEARANCE_NODES nearest nodes are looked at
 CLEARANCE_NODES = 12
+APEX_JITTER = 1e-3  # x the face's mean edge: apexes are moved at random by up to this
 APEX_SURFACE = 0.1  # x the face's mean edge: an apex at least this far from the surface
 APEX_MERGE = 0.35  # x the face's mean edge: apexes closer than this merge
 PYRAMID_FLOOR = 0.3  # the scaled Jacobian a core pyramid must reach (the gate asks 0.2)
@@ -310,6 +311,10 @@ class _Core:
         """One round: pyramids on the open faces; drop the boxes whose pyramids do not fit. Whether any dropped."""
         faces, box, kind = self.faces()
         open_ = np.flatnonzero(kind == 3)
+        if len(open_) == 0:  # the boxes fill the solid
+            self.apexes, self.pyramids, self.crowded = np.zeros((0, 3)), np.zeros((0, 5), np.int64), np.zeros(0, int)
+            self.pyramid_box = np.zeros(0, np.int64)
+            return False
         quads = faces[open_]
         corner = self.points[quads]
         centre = corner.mean(axis=1)
@@ -326,6 +331,11 @@ class _Core:
         merged = np.zeros((label.max() + 1 if len(label) else 0, 3))
         np.add.at(merged, label, apex)
         merged /= np.bincount(label, minlength=len(merged))[:, None]
+        # apexes off the planes of the lattice (a plate's side faces put them all at mid-thickness, with the
+        # surface nodes there: flat tets in the layer); deterministic
+        scale = np.zeros(len(merged))
+        np.maximum.at(scale, label, edge)
+        merged += APEX_JITTER * scale[:, None] * np.random.default_rng(len(merged)).uniform(-1, 1, merged.shape)
         pyramids = np.column_stack([quads, len(self.points) + label])
         work = np.vstack([self.points, merged])
         from ..recombine import PYRAMID, cell_qualities
@@ -433,6 +443,8 @@ def _crossing(points, triangles) -> np.ndarray:
     """The triangles that intersect another one other than along a shared edge or node (CGAL, via libigl)."""
     from igl.copyleft.cgal import remesh_self_intersections
 
+    if len(triangles) == 0:
+        return np.zeros(0, np.int64)
     used = np.unique(triangles)
     new = np.full(len(points), -1, np.int64)
     new[used] = np.arange(len(used))
@@ -460,6 +472,8 @@ def _clusters(points, radius):
 def _layer(points, boundary, free, seed):
     """(tets of the layer, points with Steiner points after them, Steiner count): module docstring, 5."""
     n = len(points)
+    if len(boundary) == 0:  # no layer: the core fills the solid
+        return np.zeros((0, 4), np.int64), points, 0
     used = np.zeros(n, bool)
     used[boundary.ravel()] = True
     used |= free
