@@ -153,7 +153,9 @@ def run_gmsh(solid, parameters, sizing, algorithm) -> dict:
         grid, out = Path(folder) / "h.bin", Path(folder) / "cells.npz"
         write_size_grid(sizing, grid)
         spec = json.dumps([solid, parameters, str(grid), algorithm, str(out)])
-        done = subprocess.run([sys.executable, __file__, "--gmsh", spec], capture_output=True, text=True)
+        done = subprocess.run(  # in the temporary folder: the R-tree algorithm writes new_points.pos there
+            [sys.executable, __file__, "--gmsh", spec], capture_output=True, text=True, cwd=folder
+        )
         if done.returncode != 0 or not out.exists():
             return {"error": (done.stderr.strip().splitlines() or ["no output"])[-1]}
         data = np.load(out)
