@@ -154,7 +154,7 @@ def run_gmsh(solid, parameters, sizing, algorithm) -> dict:
         write_size_grid(sizing, grid)
         spec = json.dumps([solid, parameters, str(grid), algorithm, str(out)])
         done = subprocess.run(  # in the temporary folder: the R-tree algorithm writes new_points.pos there
-            [sys.executable, __file__, "--gmsh", spec], capture_output=True, text=True, cwd=folder
+            [sys.executable, str(HERE / "hexdom.py"), "--gmsh", spec], capture_output=True, text=True, cwd=folder
         )
         if done.returncode != 0 or not out.exists():
             return {"error": (done.stderr.strip().splitlines() or ["no output"])[-1]}
