@@ -470,6 +470,10 @@ def recombine(points: np.ndarray, tets: np.ndarray, min_quality: float = 0.2, pr
         t0 = time.perf_counter()
         generate = _hex_candidates if kind == HEX else _prism_candidates
         candidates = generate(points, start, adjacency, CORNER_COSINE)
+        generated = len(candidates)
+        touched = np.zeros(n, bool)  # a cell of free tets has every node on one
+        touched[tets[free & ~reserved].ravel()] = True
+        candidates = candidates[touched[candidates].all(axis=1)]
         quality, members = _fill(
             candidates, tets, free & ~reserved, node_start, node_tets, faces, corners, SCALE[kind], points, min_quality
         )
@@ -486,7 +490,7 @@ def recombine(points: np.ndarray, tets: np.ndarray, min_quality: float = 0.2, pr
             free[used[used >= 0]] = False
             reserved |= _pyramid_tets(points, tets, opposite, chosen, min_quality)
         found[CELL_TYPES[kind]] = {
-            "candidates": len(candidates),
+            "candidates": generated,
             "valid": int(np.isfinite(quality).sum()),
             "chosen": int(keep.sum()),
         }

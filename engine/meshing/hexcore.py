@@ -54,7 +54,7 @@ MIN_ASPECT = 0.2  # a box's shortest edge over its longest
 APEX_HEIGHT = 0.5  # x the face's mean edge: a pyramid's height
 APEX_MIN = 0.2  # x the face's mean edge: the lowest pyramid (where the surface is near)
 APEX_CLEARANCE = 0.45  # a pyramid's height at most this x the distance from its face's centre to the nearest
-# node in front of it (not of the core); CLEARANCE_NODES nearest nodes are looked at
+# node in front of it; CLEARANCE_NODES nearest nodes are looked at
 CLEARANCE_NODES = 12
 APEX_JITTER = 1e-3  # x the face's mean edge: apexes are moved at random by up to this
 APEX_SURFACE = 0.1  # x the face's mean edge: an apex at least this far from the surface
@@ -285,8 +285,7 @@ class _Core:
         self.level, self.keep, self.geometry = level, keep, geometry
         self.found = len(boxes)
         self.left_out = 0
-        tri = np.sort(triangles, axis=1)
-        self.surface_keys = {tuple(t) for t in tri.tolist()}
+        self.surface_keys = _keys(triangles)
         self.triangles = triangles
         self.apexes = np.zeros((0, 3))
         self.pyramids = np.zeros((0, 5), np.int64)
@@ -300,10 +299,9 @@ class _Core:
         _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
         kind = np.full(len(faces), 3, np.int8)
         kind[counts[inverse.ravel()] == 2] = 0
-        for k, (i, j, m, n, p, q) in ((1, (0, 1, 2, 0, 2, 3)), (2, (0, 1, 3, 1, 2, 3))):
-            first = [tuple(t) for t in np.sort(faces[:, [i, j, m]], axis=1).tolist()]
-            second = [tuple(t) for t in np.sort(faces[:, [n, p, q]], axis=1).tolist()]
-            on = np.array([x in self.surface_keys and y in self.surface_keys for x, y in zip(first, second)], bool)
+        for k, (first, second) in ((1, ([0, 1, 2], [0, 2, 3])), (2, ([0, 1, 3], [1, 2, 3]))):
+            on = np.isin(_keys(faces[:, first]), self.surface_keys)
+            on &= np.isin(_keys(faces[:, second]), self.surface_keys)
             kind[on & (kind == 3)] = k
         return faces, box, kind
 
@@ -355,10 +353,9 @@ class _Core:
         return False
 
     def _clearance(self, centre, normal, edge):
-        """(f,) the distance from each open face's centre to the nearest node in front of it (not of the core)."""
-        in_core = np.zeros(len(self.points), bool)
-        in_core[self.boxes.ravel()] = True
-        idx = np.flatnonzero(self.keep & ~in_core)
+        """(f,) the distance from each open face's centre to the nearest node in front of it (another box's
+        corner too: across a change of octree level the two sides' pyramids share the gap)."""
+        idx = np.flatnonzero(self.keep)
         out = np.full(len(centre), np.inf)
         if len(idx) == 0:
             return out
@@ -402,9 +399,9 @@ class _Core:
         other = faces[kind == 2]
         if len(other) == 0:
             return self.triangles
-        lookup = {tuple(t): i for i, t in enumerate(np.sort(self.triangles, axis=1).tolist())}
-        first = np.array([lookup[tuple(t)] for t in np.sort(other[:, [0, 1, 3]], axis=1).tolist()])
-        second = np.array([lookup[tuple(t)] for t in np.sort(other[:, [1, 2, 3]], axis=1).tolist()])
+        order = np.argsort(self.surface_keys, kind="stable")
+        first = order[np.searchsorted(self.surface_keys, _keys(other[:, [0, 1, 3]]), sorter=order)]
+        second = order[np.searchsorted(self.surface_keys, _keys(other[:, [1, 2, 3]]), sorter=order)]
         out = self.triangles.copy()
         out[first] = other[:, [0, 1, 2]]
         out[second] = other[:, [0, 2, 3]]
@@ -422,8 +419,7 @@ class _Core:
         (towards the pyramid)."""
         faces, _, kind = self.faces()
         on_box = faces[(kind == 1) | (kind == 2)]
-        box_keys = {tuple(t) for t in np.sort(np.vstack([on_box[:, [0, 1, 2]], on_box[:, [0, 2, 3]]]), 1).tolist()}
-        rest = np.array([tuple(t) not in box_keys for t in np.sort(triangles, axis=1).tolist()], bool)
+        rest = ~np.isin(_keys(triangles), _keys(np.vstack([on_box[:, [0, 1, 2]], on_box[:, [0, 2, 3]]])))
         q, apex = self.pyramids[:, :4], self.pyramids[:, 4]
         sides = np.vstack([np.column_stack([q[:, i], q[:, (i + 1) % 4], apex]) for i in range(4)])
         # outward from the layer = into the pyramid: the outward quad runs (0, 1, 2, 3), so (q[i+1], q[i], apex)
@@ -452,6 +448,14 @@ def _crossing(points, triangles) -> np.ndarray:
         np.ascontiguousarray(points[used], float), new[triangles], detect_only=True, cutoff=len(triangles)
     )[2]
     return np.unique(pairs.ravel())
+
+
+def _keys(triangles) -> np.ndarray:
+    """(t,) one integer per triangle, the same for its nodes in any order (node indices below 2**21)."""
+    t = np.sort(np.asarray(triangles, np.int64).reshape(-1, 3), axis=1)
+    if len(t) and t.max() >= 2**21:
+        raise _NoCore("more than 2**21 nodes")
+    return (t[:, 0] << 42) | (t[:, 1] << 21) | t[:, 2]
 
 
 def _clusters(points, radius):
@@ -501,10 +505,8 @@ def _layer(points, boundary, free, seed):
 
 def _faces(tets, boundary) -> bool:
     """Whether every boundary triangle is a face of the tets, and they have no other boundary faces."""
-    faces = np.sort(tets[:, FACES].reshape(-1, 3), axis=1)
-    keys, counts = np.unique(faces, axis=0, return_counts=True)
-    single = {tuple(k) for k in keys[counts == 1].tolist()}
-    return single == {tuple(k) for k in np.sort(boundary, axis=1).tolist()}
+    keys, counts = np.unique(_keys(tets[:, FACES]), return_counts=True)
+    return np.array_equal(keys[counts == 1], np.unique(_keys(boundary)))
 
 
 def _check(points, tets, triangles):

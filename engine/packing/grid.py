@@ -188,19 +188,23 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     # the volume: the octree's centres inside, away from the boundary nodes
     world = centres @ frame
     inside = geometry.contains(world)
-    world = world[inside]
+    world, size = world[inside], cell[inside]
     h = sizing(world)
     gap, _ = cKDTree(boundary.points).query(world)
     # near an edge, the rows that would join a node to both planes are gone (CURVE_EXCLUSION): so is the node
     to_edge = cKDTree(edges).query(world)[0] if len(edges) else np.full(len(world), np.inf)
     away = (gap >= GRID_EXCLUSION * h) & (to_edge >= EDGE_EXCLUSION * h)
-    world, h = world[away], h[away]
+    world, h, size = world[away], h[away], size[away]
     world += rng.uniform(-GRID_JITTER, GRID_JITTER, world.shape) * h[:, None]  # no co-spherical eights
     inside = geometry.contains(world)
-    world = world[inside]
+    world, size = world[inside], size[inside]
     h = sizing(world)
-    # only where octree levels meet: a level's own spacing s is > 0.63 h (its parent, 2 s, was > 1.26 h)
-    keep = thin(world, THIN * h, rng)
+    # only where octree levels meet (a level's own spacing s is > 0.63 h: its parent, 2 s, was > 1.26 h), and
+    # the finer node goes: a node of the coarser level is a corner of eight boxes eight times as large
+    keep = np.zeros(len(world), bool)
+    for level_size in np.unique(size)[::-1]:
+        upto = size >= level_size
+        keep[upto] = thin(world[upto], THIN * h[upto], rng, fixed=keep[upto])
     world, h = world[keep], h[keep]
     parts.append(
         Packing(points=world, level=np.full(len(world), VOLUME, np.int8), entity=np.full(len(world), -1), radius=h / 2)
