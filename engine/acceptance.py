@@ -47,11 +47,10 @@ def boundary_topology(tets: np.ndarray) -> dict:
     """Topology of the tets' boundary faces (faces of one tet only): counts of edges not in exactly two
     faces (``open_edges``) and of edges whose two faces run the same way (``misoriented``); ``faces`` the
     (b, 3) outward boundary faces; ``bad_node`` a node on a defect or -1."""
-    from .mesh import FACES
+    from .mesh import FACES, single_faces
 
-    faces = tets[:, FACES].reshape(-1, 3)
-    _, index, counts = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
-    boundary = faces[np.sort(index[counts == 1])]
+    owner, side = single_faces(tets)
+    boundary = tets[owner[:, None], FACES[side]]
     directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     undirected, edge_counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
     open_edges = undirected[edge_counts != 2]

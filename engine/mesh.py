@@ -15,6 +15,22 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
 
 
+def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner (t,), side (t,)) of the faces of ``tets`` (m, 4) used by one tetrahedron only, in tet order:
+    they are ``tets[owner, FACES[side]]``, outward for positively oriented tets. The sorted faces' integer
+    keys are sorted (940k tets: 1 s, where np.unique(axis=0) took 10 s)."""
+    faces = np.sort(tets[:, FACES].reshape(-1, 3), axis=1)
+    n = int(tets.max(initial=0)) + 1
+    first_two = faces[:, 0] * n + faces[:, 1]
+    if n < 2**21:  # one int64 key per face sorts fastest (n^3 < 2^63)
+        order = np.argsort(first_two * n + faces[:, 2])
+    else:
+        order = np.lexsort((faces[:, 2], first_two))
+    start = np.flatnonzero(np.r_[True, (np.diff(faces[order], axis=0) != 0).any(axis=1)])
+    single = np.sort(order[start[np.diff(np.r_[start, len(faces)]) == 1]])
+    return single // 4, single % 4
+
+
 @dataclass(frozen=True, kw_only=True)
 class TetMesh:
     """Linear tetrahedra with node tags and, where the mesher conforms to the surface, tagged boundary faces.
@@ -52,8 +68,4 @@ class TetMesh:
 
     def boundary_sides(self) -> tuple[np.ndarray, np.ndarray]:
         """(owner (t,), side (t,)): the faces used by one tetrahedron only are ``tets[owner, FACES[side]]``."""
-        faces = np.sort(self.tets[:, FACES].reshape(-1, 3), axis=1)
-        order = np.lexsort(faces.T[::-1])
-        start = np.flatnonzero(np.r_[True, (np.diff(faces[order], axis=0) != 0).any(axis=1)])
-        single = np.sort(order[start[np.diff(np.r_[start, len(faces)]) == 1]])
-        return single // 4, single % 4
+        return single_faces(self.tets)

@@ -432,16 +432,6 @@ def run(
         boundary["triangle_quality"]["min"],
         timings["boundary"],
     )
-    with stage("conformity", timings):
-        conformity = size_conformity(mesh, sizing)
-    log.info(
-        "size conformity: edge length / target size median %.3f, %.1f %% within [%g, %g] (%s) (%.2f s)",
-        conformity["median"],
-        100 * conformity["within"],
-        *conformity["band"],
-        ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items() if s["edges"]),
-        timings["conformity"],
-    )
     with stage("audit", timings):
         audit = audit_mesh(mesh, sizing, packing, features, kb, str(job.source))
     shares = np.bincount(audit.cells["winner"] + 1, minlength=len(sizing.placed) + 1) / max(len(mesh.tets), 1)
@@ -457,6 +447,16 @@ def run(
         100 * np.mean(audit.cells["graded"]),
         100 * GRADED_THRESHOLD,
         timings["audit"],
+    )
+    with stage("conformity", timings):
+        conformity = size_conformity(mesh, sizing, audit.cells["winner"])
+    log.info(
+        "size conformity: edge length / target size median %.3f, %.1f %% within [%g, %g] (%s) (%.2f s)",
+        conformity["median"],
+        100 * conformity["within"],
+        *conformity["band"],
+        ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items() if s["edges"]),
+        timings["conformity"],
     )
     warnings = idle_patterns(audit.legend)
     for warning in warnings:

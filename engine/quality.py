@@ -153,15 +153,23 @@ CONFORMITY_BAND = (0.7, 1.4)  # edge length / target size counted as conforming
 CONFORMITY_BINS = np.linspace(0.0, 3.0, 61)
 
 
-def size_conformity(mesh, sizing) -> dict:
+def size_conformity(mesh, sizing, winner: np.ndarray | None = None) -> dict:
     """Edge length over the target size h at the edge's midpoint: median, share in CONFORMITY_BAND,
-    histogram, and the same per winning pattern (by the sizing field's audited evaluation)."""
+    histogram, and the same per winning pattern. ``winner`` (m,): the audit's winning pattern of each
+    tetrahedron (engine.audit), an edge counted under one tetrahedron holding it; without it (another
+    mesher's mesh) the sizing field's audited evaluation at the midpoints (a second pass over every pattern)."""
     pairs = np.sort(mesh.tets[:, EDGES].reshape(-1, 2), axis=1).astype(np.int64)
-    keys = np.sort(pairs[:, 0] * len(mesh.points) + pairs[:, 1])  # one int64 per edge, sorted: 3x faster
-    keys = keys[np.r_[True, keys[1:] != keys[:-1]]]  # than np.unique's hash on 6M edges
+    keys = pairs[:, 0] * len(mesh.points) + pairs[:, 1]  # one int64 per edge: sorting beats np.unique's hash
+    order = np.argsort(keys)
+    first = np.r_[True, keys[order[1:]] != keys[order[:-1]]]
+    keys, holder = keys[order[first]], order[first] // len(EDGES)
     a, b = mesh.points[keys // len(mesh.points)], mesh.points[keys % len(mesh.points)]
-    evaluation = sizing.evaluate((a + b) / 2)
-    ratio = np.linalg.norm(b - a, axis=1) / evaluation.h
+    if winner is None:
+        evaluation = sizing.evaluate((a + b) / 2)
+        h, edge_winner = evaluation.h, evaluation.winner
+    else:  # the graded field alone is the audited h (it never exceeds the raw size)
+        h, edge_winner = sizing((a + b) / 2), winner[holder]
+    ratio = np.linalg.norm(b - a, axis=1) / h
     low, high = CONFORMITY_BAND
 
     def stats(r):
@@ -171,7 +179,7 @@ def size_conformity(mesh, sizing) -> dict:
             "within": float(np.mean((r >= low) & (r <= high))) if len(r) else None,
         }
 
-    by_pattern = {p.id: stats(ratio[evaluation.winner == k]) for k, p in enumerate(sizing.placed)}
+    by_pattern = {p.id: stats(ratio[edge_winner == k]) for k, p in enumerate(sizing.placed)}
     counts, _ = np.histogram(np.clip(ratio, CONFORMITY_BINS[0], CONFORMITY_BINS[-1]), CONFORMITY_BINS)
     return {
         **stats(ratio),
