@@ -96,7 +96,8 @@ def mixed_model(mixed: MixedMesh, groups, cell_data: dict) -> MixedModel:
 
 
 def _blocks(model):
-    return [(CELL_TYPES[k], c.astype(np.int64)) for k, c in enumerate(model.mixed.cells)]
+    """The non-empty cell blocks (meshio's VTU writer fails on an empty one: an all-hexahedra mesh)."""
+    return [(CELL_TYPES[k], c.astype(np.int64)) for k, c in enumerate(model.mixed.cells) if len(c)]
 
 
 def _point_data(model, audit: bool) -> dict:
@@ -108,8 +109,9 @@ def _point_data(model, audit: bool) -> dict:
 
 def write_vtu(path, model) -> None:
     """VTU: hexahedron, wedge, pyramid and tetra blocks, the node tags and the audit fields per cell."""
+    present = [k for k, c in enumerate(model.mixed.cells) if len(c)]
     cell_data = {
-        name: [v.astype(np.int64) if v.dtype.kind in "iu" else v for v in values]
+        name: [values[k].astype(np.int64) if values[k].dtype.kind in "iu" else values[k] for k in present]
         for name, values in model.mixed.cell_data.items()
     }
     mesh = meshio.Mesh(model.points, _blocks(model), point_data=_point_data(model, True), cell_data=cell_data)

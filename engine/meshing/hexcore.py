@@ -111,7 +111,10 @@ def _mesh(packing, geometry, features, seed, lattice):
 
     start = time.perf_counter()
     frame = np.asarray(lattice["frame"], float)
-    local, on_lattice = _snap(points @ frame.T, np.asarray(lattice["origin"], float), lattice["size"])
+    from ..packing.grid import Warp
+
+    warp = Warp(lattice.get("warp", [[[], []]] * 3))
+    local, on_lattice = _snap(points @ frame.T, np.asarray(lattice["origin"], float), lattice["size"], warp)
     del on_lattice  # the grid's jitter stays: the layer's Delaunay meets no four co-circular coplanar nodes
     boxes = _boxes(local, keep, h, geometry.scale)
     boxes = boxes[_empty(local, boxes, keep)]
@@ -207,10 +210,11 @@ def _settle(core, points, rounds) -> int:
             raise _NoCore(f"the core's pyramids still cross after {rounds} rounds")
 
 
-def _snap(local, origin, root):
+def _snap(local, origin, root, warp):
     """(frame coordinates with the lattice values exact, (n, 3) whether each is a lattice value)."""
-    u = (local - origin) / root
-    out = local.copy()
+    xi = warp.inverse(local)
+    u = (xi - origin) / root
+    out = xi.copy()
     on = np.zeros(local.shape, bool)
     for level in range(16):
         v = u * 2**level - 0.5
@@ -218,7 +222,7 @@ def _snap(local, origin, root):
         exact = origin + (np.round(v) + 0.5) * root / 2**level
         out = np.where(near, exact, out)
         on |= near
-    return out, on
+    return np.where(on, warp(out), local), on
 
 
 def _next_along(local, keep, axis, quantum):

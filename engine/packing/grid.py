@@ -32,6 +32,8 @@ ALIGNED = np.cos(np.radians(6.0))  # a normal within 6 deg of a frame axis is al
 GRID_EXCLUSION = 0.45  # x h kept free between grid nodes and the boundary nodes (a boundary layer of >= 0.5 s)
 GRID_JITTER = 1e-4  # x h: the grid nodes' random offsets, so that Delaunay meets no eight co-spherical nodes
 EDGE_EXCLUSION = 0.75  # x h kept free between grid nodes and the curve and corner nodes (> CURVE_EXCLUSION x 2^0.5)
+LATTICE_EXCLUSION = 0.2  # x h kept free between grid nodes and boundary nodes on the lattice's lines (the
+# nearest layer is half a cell from an aligned plane: its boxes are half boxes)
 THIN = 0.6  # x h: volume nodes closer than this are thinned (two octree levels side by side)
 CURVE_EXCLUSION = 0.5  # x h kept free between projected grid nodes and the curve and corner nodes
 
@@ -57,25 +59,88 @@ def direction_frame(features) -> np.ndarray:
     return frame
 
 
-def _octree_centres(lo, hi, sizing, frame):
-    """(centres (k, 3) in frame coordinates, cell size (k,), the root cells' corner (3,) and size): the octree
-    cells whose size matches h. A cell of level l (size ``size / 2**l``) has its centre at
-    ``origin + (i + 1/2) size / 2**l`` on each axis: the levels' coordinates are disjoint sets."""
+class Warp:
+    """Per frame axis a monotone piecewise-linear map from lattice coordinates (xi) to frame coordinates, slope 1
+    beyond its knots: ``knots[k] = (xi values, frame values)``. The aligned planes of an axis lie on root-cell
+    boundaries: between two planes ``d`` apart there are ceil(d / root) root cells, shrunk to fit."""
+
+    def __init__(self, knots):
+        self.knots = [(np.asarray(a, float), np.asarray(b, float)) for a, b in knots]
+
+    @staticmethod
+    def _map(u, a, b):
+        if len(a) == 0:
+            return u.copy()
+        out = np.interp(u, a, b)
+        out = np.where(u < a[0], b[0] + (u - a[0]), out)
+        return np.where(u > a[-1], b[-1] + (u - a[-1]), out)
+
+    def __call__(self, xi):
+        return np.column_stack([self._map(xi[:, k], *self.knots[k]) for k in range(3)])
+
+    def inverse(self, x):
+        return np.column_stack([self._map(x[:, k], self.knots[k][1], self.knots[k][0]) for k in range(3)])
+
+    def slope(self, xi):
+        """(n, 3) the map's slope at each point (the shrink of a cell there)."""
+        out = np.ones((len(xi), 3))
+        for k, (a, b) in enumerate(self.knots):
+            if len(a) > 1:
+                i = np.clip(np.searchsorted(a, xi[:, k], side="right") - 1, 0, len(a) - 2)
+                inside = (xi[:, k] >= a[0]) & (xi[:, k] <= a[-1])
+                out[inside, k] = ((b[1:] - b[:-1]) / (a[1:] - a[:-1]))[i[inside]]
+        return out
+
+
+def plane_warp(features, frame, root) -> Warp:
+    """The Warp that puts the aligned planar patches' planes on root-cell boundaries (a plane closer than half a
+    root cell to a larger one of the same axis is left off them)."""
+    knots = []
+    for k in range(3):
+        levels = []
+        for patch in sorted(features.patches, key=lambda p: -p.area):
+            if not patch.planar:
+                continue
+            n = patch.normal / max(np.linalg.norm(patch.normal), 1e-300)
+            if abs(frame[k] @ n) < ALIGNED:
+                continue
+            level = float(np.mean(patch.vertices @ frame[k]))
+            if all(abs(level - other) >= 0.5 * root for other in levels):
+                levels.append(level)
+        levels = np.sort(levels)
+        xi = levels[:1].copy()
+        for gap in np.diff(levels):
+            xi = np.append(xi, xi[-1] + np.ceil(gap / root - 1e-9) * root)
+        knots.append((xi, levels))
+    return Warp(knots)
+
+
+def _octree_centres(lo, hi, sizing, frame, warp):
+    """(centres (k, 3) in frame coordinates, cell sizes (k, 3) along each axis, the root cells' corner (3,) in
+    lattice coordinates, their size): the octree cells, in the lattice coordinates of ``warp``, whose size
+    matches h. A cell of level l (size ``size / 2**l``) has its centre at ``origin + (i + 1/2) size / 2**l`` on
+    each lattice axis: the levels' coordinates are disjoint sets."""
     size = sizing.h_max * SPACING_SLACK * (1 - 1e-9)
+    lo, hi = warp.inverse(lo[None])[0], warp.inverse(hi[None])[0]
     counts = np.maximum(1, np.ceil((hi - lo) / size)).astype(int)
-    lo = 0.5 * (lo + hi) - 0.5 * counts * size  # centred on the solid's box
+    lo = 0.5 * (lo + hi) - 0.5 * counts * size  # centred on the solid's box, or from a plane on root boundaries
+    for k, (xi, _) in enumerate(warp.knots):
+        if len(xi):
+            lo[k] = xi[0] - size * np.ceil((xi[0] - lo[k]) / size - 1e-9)
+            counts[k] = max(1, int(np.ceil((hi[k] - lo[k]) / size - 1e-9)))
     origin, root = lo.copy(), size
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
     out, sizes = [], []
     while len(centres):
-        done = size <= sizing(centres @ frame) * SPACING_SLACK
+        cell = size * warp.slope(centres)
+        done = cell.max(axis=1) <= sizing(warp(centres) @ frame) * SPACING_SLACK
         out.append(centres[done])
-        sizes.append(np.full(int(done.sum()), size))
+        sizes.append(cell[done])
         size /= 2
         centres = (centres[~done][:, None, :] + 0.5 * size * octants[None]).reshape(-1, 3)
-    return np.concatenate(out), np.concatenate(sizes), origin, root
+    return warp(np.concatenate(out)), np.concatenate(sizes), origin, root
 
 
 def _on_faces(points, vertices, faces, tolerance) -> np.ndarray:
@@ -114,9 +179,23 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     frame = direction_frame(features)
     vertices = np.asarray(geometry.mesh.vertices, float)
     local = vertices @ frame.T
-    centres, cell, origin, root = _octree_centres(local.min(axis=0), local.max(axis=0), sizing, frame)
+    warp = plane_warp(features, frame, sizing.h_max * SPACING_SLACK * (1 - 1e-9))
+    centres, cells, origin, root = _octree_centres(local.min(axis=0), local.max(axis=0), sizing, frame, warp)
+    cell = cells.max(axis=1)
     tolerance = 1e-6 * geometry.scale
+
+    def on_planes(points, axes=(0, 1, 2)):
+        """Whether each point's frame coordinates on ``axes`` are all levels of aligned planes (the warp's)."""
+        x = points @ frame.T
+        ok = np.ones(len(points), bool)
+        for k in axes:
+            levels = warp.knots[k][1]
+            ok &= np.abs(x[:, k, None] - levels[None]).min(axis=1, initial=np.inf) < tolerance
+        return ok
+
     parts = [corner_nodes(features, sizing)]
+    # a corner where three aligned planes meet is on the lattice's lines; the others are kept clear of
+    lattice_corner = on_planes(parts[0].points)
     # straight curves along an axis: the grid's columns projected onto them; the others as the start has them
     straight = {i: _straight_axis(c, frame, tolerance) for i, c in enumerate(features.curves)}
     points, entity = [], []
@@ -126,11 +205,13 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         curve = features.curves[index]
         a, b = curve.points[0] @ frame.T, curve.points[-1] @ frame.T
         other = [k for k in range(3) if k != axis]
-        near = np.all(np.abs(centres[:, other] - a[other]) < 0.5 * cell[:, None], axis=1)
+        near = np.all(np.abs(centres[:, other] - a[other]) < 0.75 * cells[:, other], axis=1)  # the nearest columns
         low, high = sorted((a[axis], b[axis]))
         column = np.unique(centres[near, axis])
         h = sizing(np.outer(column - a[axis], frame[axis]) + curve.points[0])
-        keep = (column - low > CURVE_EXCLUSION * h) & (high - column > CURVE_EXCLUSION * h)
+        ends = np.array([curve.points[0], curve.points[-1]])[np.argsort([a[axis], b[axis]])]
+        clear = np.where(on_planes(ends), LATTICE_EXCLUSION, CURVE_EXCLUSION)  # from the low end, the high end
+        keep = (column - low > clear[0] * h) & (high - column > clear[1] * h)
         on = np.repeat(a[None], int(keep.sum()), axis=0)
         on[:, axis] = column[keep]
         points.append(on @ frame)
@@ -145,7 +226,9 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     )
     parts += [curved, straight_nodes]
     boundary = Packing.concatenate(parts)
-    edges = boundary.points  # the corner and curve nodes
+    # the corner and curve nodes off the lattice (kept clear of by EDGE_EXCLUSION and CURVE_EXCLUSION) and on it
+    edges = np.vstack([parts[0].points[~lattice_corner], curved.points])
+    lattice_edges = np.vstack([parts[0].points[lattice_corner], straight_points])
     # planar patches at right angles to an axis: the grid's rows projected onto them
     aligned = np.zeros(len(features.patches), bool)
     projected, owner = [], []
@@ -160,7 +243,8 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         level = float(np.mean(patch.vertices @ frame[axis]))
         inward = -np.sign(frame[axis] @ n)  # from the plane into the solid, along the axis
         depth = (centres[:, axis] - level) * inward
-        near = (depth > 0) & (depth <= cell)  # the nearest layer inside: the columns the boxes under it follow
+        near = (depth > 0) & (depth <= 0.75 * cells[:, axis])  # the nearest layer inside (half a cell in): the
+        # columns the boxes under it follow
         on = centres[near].copy()
         on[:, axis] = level
         world = on @ frame
@@ -170,9 +254,10 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         owner.append(np.full(len(world), index))
     projected = np.concatenate(projected).reshape(-1, 3) if projected else np.zeros((0, 3))
     owner = np.concatenate(owner).astype(np.int64) if owner else np.zeros(0, np.int64)
-    if len(projected) and len(boundary):
-        gap, _ = cKDTree(boundary.points).query(projected)
-        keep = gap > CURVE_EXCLUSION * sizing(projected)
+    if len(projected):
+        h = sizing(projected)
+        keep = _gap(edges, projected) > CURVE_EXCLUSION * h
+        keep &= _gap(lattice_edges, projected) > LATTICE_EXCLUSION * h
         projected, owner = projected[keep], owner[keep]
     parts.append(
         Packing(
@@ -183,17 +268,17 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
         )
     )
     boundary = Packing.concatenate(parts)
+    on_lattice = np.vstack([lattice_edges, projected])
     parts.append(_random_patch_nodes(geometry, features, sizing, boundary, rng, ~aligned[features.face_patch]))
-    boundary = Packing.concatenate(parts)
+    off_lattice = np.vstack([edges, parts[-1].points])  # kept GRID_EXCLUSION from, the lattice's LATTICE_EXCLUSION
     # the volume: the octree's centres inside, away from the boundary nodes
     world = centres @ frame
     inside = geometry.contains(world)
     world, size = world[inside], cell[inside]
     h = sizing(world)
-    gap, _ = cKDTree(boundary.points).query(world)
-    # near an edge, the rows that would join a node to both planes are gone (CURVE_EXCLUSION): so is the node
-    to_edge = cKDTree(edges).query(world)[0] if len(edges) else np.full(len(world), np.inf)
-    away = (gap >= GRID_EXCLUSION * h) & (to_edge >= EDGE_EXCLUSION * h)
+    away = (_gap(off_lattice, world) >= GRID_EXCLUSION * h) & (_gap(on_lattice, world) >= LATTICE_EXCLUSION * h)
+    # near an edge off the lattice, the rows that would join a node to both planes are gone: so is the node
+    away &= _gap(edges, world) >= EDGE_EXCLUSION * h
     world, h, size = world[away], h[away], size[away]
     world += rng.uniform(-GRID_JITTER, GRID_JITTER, world.shape) * h[:, None]  # no co-spherical eights
     inside = geometry.contains(world)
@@ -203,8 +288,11 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     # the finer node goes: a node of the coarser level is a corner of eight boxes eight times as large
     keep = np.zeros(len(world), bool)
     for level_size in np.unique(size)[::-1]:
-        upto = size >= level_size
-        keep[upto] = thin(world[upto], THIN * h[upto], rng, fixed=keep[upto])
+        new = np.flatnonzero(size == level_size)
+        if keep.any():
+            gap, _ = cKDTree(world[keep]).query(world[new])
+            new = new[gap >= THIN * h[new]]
+        keep[new] = True
     world, h = world[keep], h[keep]
     parts.append(
         Packing(points=world, level=np.full(len(world), VOLUME, np.int8), entity=np.full(len(world), -1), radius=h / 2)
@@ -219,9 +307,21 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
             "frame": np.round(frame, 6).tolist(),
             # the lattice, for the hex-core mesher (engine/meshing/hexcore.py): frame rows, the root cells'
             # corner in frame coordinates and their size (module docstring of _octree_centres)
-            "grid": {"frame": frame.tolist(), "origin": origin.tolist(), "size": float(root)},
+            "grid": {
+                "frame": frame.tolist(),
+                "origin": origin.tolist(),
+                "size": float(root),
+                "warp": [[a.tolist(), b.tolist()] for a, b in warp.knots],
+            },
         },
     )
+
+
+def _gap(nodes, points) -> np.ndarray:
+    """(n,) the distance from each point to the nearest of ``nodes`` (inf without nodes)."""
+    if len(nodes) == 0:
+        return np.full(len(points), np.inf)
+    return cKDTree(nodes).query(points)[0]
 
 
 class _Only:
