@@ -58,6 +58,7 @@ class SizingField:
     max_size: float | None = None
     features: Features | None = None
     grid: np.ndarray = field(repr=False)  # graded node sizes of the background grid
+    reach: np.ndarray = field(repr=False)  # (patterns, cells) bool: whether a pattern's mu can be > 0 in a cell
     origin: np.ndarray
     cell: float
     shape: tuple[int, int, int]
@@ -80,7 +81,7 @@ class SizingField:
         if not placed:
             raise KnowledgeError("no pattern is placed", fix="place the base pattern 'uniform-domain'")
         placed = tuple(placed)
-        grid, origin, cell, shape = _graded_grid(placed, geometry, gradation, global_size)
+        grid, reach, origin, cell, shape = _graded_grid(placed, geometry, gradation, global_size)
         h_min, h_max = float(grid.min()), float(grid.max())
         if min_size is not None:
             h_min = max(h_min, min_size)
@@ -95,6 +96,7 @@ class SizingField:
             max_size=max_size,
             features=features,
             grid=grid,
+            reach=reach,
             origin=origin,
             cell=cell,
             shape=shape,
@@ -106,15 +108,24 @@ class SizingField:
     def _raw(self, points: np.ndarray):
         """Raw size, winner, runner-up, winner's zone, and (n, patterns) memberships and sizes."""
         n, count = len(points), len(self.placed)
-        mu, size, zone = np.empty((count, n)), np.empty((count, n)), np.empty((count, n), dtype=np.int64)
-        for k, placed in enumerate(self.placed):
-            mu[k], size[k], zone[k] = placed.evaluate(points)
+        mu, size, zone = np.zeros((count, n)), np.full((count, n), np.inf), np.full((count, n), -1, dtype=np.int64)
+        cells = np.floor((points - self.origin) / self.cell).astype(np.int64)
+        in_grid = np.all((cells >= 0) & (cells < np.array(self.reach_shape)), axis=1)
+        cell = np.ravel_multi_index(tuple(np.clip(cells, 0, np.array(self.reach_shape) - 1).T), self.reach_shape)
+        for k, placed in enumerate(self.placed):  # each pattern only where its mu can be > 0 (its grid cells)
+            rows = np.flatnonzero(self.reach[k, cell] | ~in_grid)
+            mu[k, rows], size[k, rows], zone[k, rows] = placed.evaluate(points[rows])
         _tie(mu, np.array([placed.ties for placed in self.placed]))
         winner, runner_up = _dominance(mu, size)
         rows = np.arange(n)
         safe = np.maximum(winner, 0)
         raw = np.where(winner >= 0, size[safe, rows], self.global_size)
         return raw, winner, runner_up, zone[safe, rows], mu.T, size.T
+
+    @property
+    def reach_shape(self) -> tuple[int, int, int]:
+        """The grid's cells along each axis (one fewer than its nodes)."""
+        return tuple(n - 1 for n in self.shape)
 
     def _graded(self, points: np.ndarray) -> np.ndarray:
         """Trilinear interpolation of the graded grid."""
@@ -156,7 +167,8 @@ def _graded_grid(placed_patterns, geometry, gradation: float, global_size: float
     node the minimum over its 8 cells;
     then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
     Trilinear interpolation of such a grid is Euclidean-Lipschitz with g - 1
-    and never exceeds the raw size.
+    and never exceeds the raw size. Also returned: (patterns, cells) whether each pattern's mu can be
+    above 0 somewhere in each cell (its upper bound there), so an evaluation skips it elsewhere.
     """
     lo, hi = geometry.bounds
     extent = hi - lo
@@ -175,7 +187,9 @@ def _graded_grid(placed_patterns, geometry, gradation: float, global_size: float
     for index, m_lo, _, _ in bounded:
         best_low[index] = np.maximum(best_low[index], m_lo)
     cell_low = np.full(len(best_low), np.inf)
-    for index, _, m_hi, h_lo in bounded:
+    reach = np.zeros((len(bounded), len(best_low)), bool)
+    for k, (index, _, m_hi, h_lo) in enumerate(bounded):
+        reach[k, index[m_hi > 0]] = True
         can_win = (m_hi > 0) & (m_hi >= best_low[index])
         cell_low[index[can_win]] = np.minimum(cell_low[index[can_win]], h_lo[can_win])
     cell_low = np.where(best_low > 0, cell_low, np.minimum(cell_low, global_size))
@@ -193,7 +207,7 @@ def _graded_grid(placed_patterns, geometry, gradation: float, global_size: float
     grid = nodes
     for axis in range(3):
         grid = _grade_along(grid, axis, rate * cell)
-    return grid, origin, cell, shape
+    return grid, reach, origin, cell, shape
 
 
 def _cells_near(distance, bound: float, origin: np.ndarray, cell: float, shape: tuple) -> np.ndarray:
