@@ -12,9 +12,12 @@ Nodes: corners; curves at equal steps of the integral of 1/h (:mod:`engine.packi
 curves along a frame axis, whose nodes are the grid's columns projected onto them; planar patches at right
 angles to a frame axis get the grid's rows projected onto their plane (so that the boundary layer is boxes of
 the grid); other patches the start's thinned random nodes; the volume the centres of an octree in the frame,
-graded by h (a cell of size s emits where s <= 2^(1/3) h, as the lattice start, but not jittered), kept
-``GRID_EXCLUSION`` h from the boundary nodes. Between octree levels (a factor 2) the grid is not regular and
-the recombination leaves tetrahedra and pyramids there.
+graded by h (a cell of size s emits where s <= 2^(1/3) h, as the lattice start, but jittered by 1e-4 h only).
+The octree lives in lattice coordinates that :func:`plane_warp` maps piecewise linearly onto the frame's, so
+that the aligned planes lie on cell boundaries and the grid's nearest layer is half a cell from each of them;
+grid nodes are kept ``LATTICE_EXCLUSION`` h from the boundary nodes on the lattice's lines and
+``GRID_EXCLUSION`` h from the others. Between octree levels (a factor 2) the grid is not regular and the
+hex-core mesher (engine/meshing/hexcore.py) leaves tetrahedra and pyramids there.
 """
 
 from __future__ import annotations
