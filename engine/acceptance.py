@@ -43,13 +43,14 @@ class Tolerances:
     hex_jacobian: float = 0.2  # min scaled corner Jacobian of a hexahedron, prism or pyramid (hex-dominant)
 
 
-def boundary_topology(tets: np.ndarray) -> dict:
-    """Topology of the tets' boundary faces (faces of one tet only): counts of edges not in exactly two
-    faces (``open_edges``) and of edges whose two faces run the same way (``misoriented``); ``faces`` the
-    (b, 3) outward boundary faces; ``bad_node`` a node on a defect or -1."""
+def boundary_topology(tets: np.ndarray, sides: tuple | None = None) -> dict:
+    """Topology of the tets' boundary faces (faces of one tet only; ``sides`` their (owner, side) when known,
+    :func:`engine.mesh.single_faces`): counts of edges not in exactly two faces (``open_edges``) and of edges
+    whose two faces run the same way (``misoriented``); ``faces`` the (b, 3) outward boundary faces;
+    ``bad_node`` a node on a defect or -1."""
     from .mesh import FACES, single_faces
 
-    owner, side = single_faces(tets)
+    owner, side = single_faces(tets) if sides is None else sides
     boundary = tets[owner[:, None], FACES[side]]
     directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     undirected, edge_counts = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
@@ -90,7 +91,7 @@ def check_mesh(
             check="positive volumes",
             fix=f"mesh again with another seed and report the input; {KEEP_INVALID}",
         )
-    topology = boundary_topology(tets)
+    topology = boundary_topology(tets, mesh.boundary_sides())
     if topology["open_edges"] or topology["misoriented"]:
         what = (
             f"{topology['open_edges']} boundary edges not shared by exactly two faces"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -67,5 +68,10 @@ class TetMesh:
         return self.tets[owner[:, None], FACES[side]]
 
     def boundary_sides(self) -> tuple[np.ndarray, np.ndarray]:
-        """(owner (t,), side (t,)): the faces used by one tetrahedron only are ``tets[owner, FACES[side]]``."""
+        """(owner (t,), side (t,)): the faces used by one tetrahedron only are ``tets[owner, FACES[side]]``
+        (found once per mesh value: the analysis stages, the gate and the FE model all ask)."""
+        return self._single_faces
+
+    @cached_property
+    def _single_faces(self) -> tuple[np.ndarray, np.ndarray]:
         return single_faces(self.tets)
