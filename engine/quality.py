@@ -156,19 +156,26 @@ CONFORMITY_BINS = np.linspace(0.0, 3.0, 61)
 def size_conformity(mesh, sizing, winner: np.ndarray | None = None) -> dict:
     """Edge length over the target size h at the edge's midpoint: median, share in CONFORMITY_BAND,
     histogram, and the same per winning pattern. ``winner`` (m,): the audit's winning pattern of each
-    tetrahedron (engine.audit), an edge counted under one tetrahedron holding it; without it (another
-    mesher's mesh) the sizing field's audited evaluation at the midpoints (a second pass over every pattern)."""
+    tetrahedron (engine.audit; -1 none), an edge counted under the smallest winner of the tetrahedra holding
+    it; without it (another mesher's mesh) the sizing field's audited evaluation at the midpoints (a second
+    pass over every pattern)."""
+    n = len(mesh.points)
     pairs = np.sort(mesh.tets[:, EDGES].reshape(-1, 2), axis=1).astype(np.int64)
-    keys = pairs[:, 0] * len(mesh.points) + pairs[:, 1]  # one int64 per edge: sorting beats np.unique's hash
-    order = np.argsort(keys)
-    first = np.r_[True, keys[order[1:]] != keys[order[:-1]]]
-    keys, holder = keys[order[first]], order[first] // len(EDGES)
-    a, b = mesh.points[keys // len(mesh.points)], mesh.points[keys % len(mesh.points)]
+    keys = pairs[:, 0] * n + pairs[:, 1]  # one int64 per edge: sorting beats np.unique's hash
+    if winner is not None:  # the winner rides in the key's low digits: one sort, no argsort
+        span = int(winner.max(initial=-1)) + 2
+        keys = keys * span + np.repeat(winner.astype(np.int64) + 1, len(EDGES))
+    else:
+        span = 1
+    keys = np.sort(keys)
+    keys = keys[np.r_[True, keys[1:] // span != keys[:-1] // span]]
+    edge, edge_winner = keys // span, keys % span - 1
+    a, b = mesh.points[edge // n], mesh.points[edge % n]
     if winner is None:
         evaluation = sizing.evaluate((a + b) / 2)
         h, edge_winner = evaluation.h, evaluation.winner
     else:  # the graded field alone is the audited h (it never exceeds the raw size)
-        h, edge_winner = sizing((a + b) / 2), winner[holder]
+        h = sizing((a + b) / 2)
     ratio = np.linalg.norm(b - a, axis=1) / h
     low, high = CONFORMITY_BAND
 
