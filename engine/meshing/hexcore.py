@@ -10,7 +10,9 @@ between them and the rest of the solid is tetrahedralised.
    other frame coordinates are the same, in order along the third; grid nodes and the grid rows projected onto
    aligned planes and straight curves alike), with edges at most ``MAX_EDGE`` h and at least ``MIN_ASPECT`` of
    its longest, no other node in it or on it, and each face either a face of another box, or two surface
-   triangles, or a face that gets a pyramid (3).
+   triangles, or a face that gets a pyramid (3). And the wall hexahedra: a box face whose four corners' next
+   nodes along the lines out of it are boundary nodes (the grid packer's wall nodes on a curved patch), joined
+   to them.
 3. Each core face that is neither gets a pyramid outward, its apex ``APEX_HEIGHT`` x the face's edge from it
    (lower where the surface is near); apexes closer than ``APEX_MERGE`` x the edge merge (two or three
    pyramids around a concave edge or corner of the core share the centre of the missing box). A box whose
@@ -39,7 +41,7 @@ from scipy.spatial import cKDTree
 
 from ..levels import STEINER
 from ..mesh import FACES, TetMesh, signed_volumes
-from ..packing import VOLUME
+from ..packing import PATCH, VOLUME
 from . import register_mesher
 from .delaunay import mesh_delaunay
 from .improve import FLOOR, gmsh_optimize, min_dihedrals, relocate, swap_bad_faces
@@ -62,6 +64,7 @@ APEX_MERGE = 0.35  # x the face's mean edge: apexes closer than this merge
 PYRAMID_FLOOR = 0.3  # the scaled Jacobian a core pyramid must reach (the gate asks 0.2)
 NODE_CLEARANCE = 0.6  # x the face's mean edge: volume nodes of the layer this near an apex are left out
 LAYER_FLOOR = 8.0  # deg: a layer tet below this after the improvement takes the boxes at its nodes out of the core
+WALL_JITTER = 1e-4  # x h: a curved patch's node off every box is moved by up to this (back onto the surface)
 CORE_ROUNDS = 60  # rounds of dropping the boxes whose pyramids do not fit
 # the box's corners: 0 low, 1 +x, 2 +x+y, 3 +y, 4 +z, 5 +x+z, 6 +x+y+z, 7 +y+z (VTK's hexahedron order)
 KUHN_TETS = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 1, 5, 6], [0, 4, 5, 6], [0, 3, 7, 6], [0, 4, 7, 6]])
@@ -78,6 +81,12 @@ def mesh_hexcore(packing, geometry, features, *, seed: int = 0) -> TetMesh:
     try:
         return _mesh(packing, geometry, features, seed, lattice)
     except _NoCore as error:
+        try:  # without the wall hexahedra
+            mesh = _mesh(packing, geometry, features, seed, lattice, walls=False)
+            mesh.stats["hex_core"]["walls_left_out"] = str(error)
+            return mesh
+        except _NoCore:
+            pass
         return _fallback(packing, geometry, features, seed, str(error))
     except RuntimeError as error:  # Gmsh could not tetrahedralise the layer
         return _fallback(packing, geometry, features, seed, f"the layer between the core and the surface: {error}")
@@ -94,7 +103,7 @@ def _fallback(packing, geometry, features, seed, why):
     return mesh
 
 
-def _mesh(packing, geometry, features, seed, lattice):
+def _mesh(packing, geometry, features, seed, lattice, walls=True):
     seconds = {}
     start = time.perf_counter()
     surface = triangulate_boundary(packing, geometry, features)
@@ -118,12 +127,29 @@ def _mesh(packing, geometry, features, seed, lattice):
     del on_lattice  # the grid's jitter stays: the layer's Delaunay meets no four co-circular coplanar nodes
     boxes = _boxes(local, keep, h, geometry.scale)
     boxes = boxes[_empty(local, boxes, keep)]
+    walls = _wall_boxes(points, local, keep, nodes.level, boxes, h, geometry.scale) if walls else boxes[:0]
+    walls = walls[_empty(local, walls, keep)]
+    # the curved patches' nodes off no box are moved by up to WALL_JITTER h, back onto the surface: four wall
+    # nodes on two lines along a cylinder's axis are coplanar and cocircular, and the layer's constrained
+    # Delaunay may split such a quad along the other diagonal
+    curved = np.zeros(len(points), bool)
+    planar = np.array([p.planar for p in features.patches] + [True])
+    curved[(nodes.level == PATCH) & ~planar[np.where(nodes.level == PATCH, nodes.entity, -1)]] = True
+    moved = np.zeros(len(points), bool)
+    jitter = np.random.default_rng(seed).uniform(-WALL_JITTER, WALL_JITTER, points.shape) * h[:, None]
+    found = len(boxes)
+    boxes = np.unique(np.vstack([boxes, walls]), axis=0)
     core = _Core(points, local, boxes, triangles, nodes.level, keep, geometry)
     rounds, seconds["core"], seconds["layer"] = 0, 0.0, 0.0
     while True:
         rounds = _settle(core, points, rounds)
         seconds["core"] += time.perf_counter() - start
         start = time.perf_counter()
+        move = curved & ~moved
+        move[core.boxes.ravel()] = False
+        if move.any():
+            points[move] = geometry.closest_point(points[move] + jitter[move])[0]
+            moved |= move
         triangles = core.flipped_triangles()
         layer_boundary, _ = core.layer_boundary(triangles)
         all_points = np.vstack([points, core.apexes])
@@ -169,7 +195,8 @@ def _mesh(packing, geometry, features, seed, lattice):
         "steiner_points": steiner,
         "hex_core": {
             "boxes": len(core.boxes),
-            "lattice_boxes": core.found,
+            "lattice_boxes": found,
+            "wall_boxes": len(boxes) - found,  # wall hexahedra found (not boxes of the lattice already)
             "pyramids": len(core.pyramids),
             "apexes": len(core.apexes),
             "boxes_left_out": core.left_out,
@@ -261,6 +288,55 @@ def _boxes(local, keep, h, scale):
     size = h[boxes].max(axis=1)
     good = (longest <= MAX_EDGE * size) & (shortest >= MIN_ASPECT * longest)
     return boxes[good]
+
+
+# a box's corners by their bits along the frame axes (KUHN_TETS' order)
+BITS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
+BIT_INDEX = {tuple(b): i for i, b in enumerate(BITS.tolist())}
+
+
+def _wall_boxes(points, local, keep, level, boxes, h, scale):
+    """(w, 8) the wall hexahedra: a box face whose four corners' next nodes along the lattice's line out of the
+    box (the axis at right angles to the face) are all boundary nodes (the grid packer's wall nodes, or any
+    node of a patch that the lines end on) within MAX_EDGE h, joined to them; the corners in KUHN_TETS' order by
+    their bits, so the Kuhn split matches the box's. Kept when each of its Kuhn tets is oriented as in a box
+    and its scaled Jacobian is at least PYRAMID_FLOOR."""
+    if len(boxes) == 0:
+        return np.zeros((0, 8), np.int64)
+    quantum = 1e-7 * scale
+    out = []
+    for k in range(3):
+        forward = _next_along(local, keep, k, quantum)
+        backward = np.full(len(local), -1, np.int64)
+        backward[forward[forward >= 0]] = np.flatnonzero(forward >= 0)
+        for side, step in ((1, forward), (0, backward)):
+            # the box's corners on that side, in the new hexahedron's corners on the other
+            new = np.zeros((len(boxes), 8), np.int64)
+            ok = np.ones(len(boxes), bool)
+            for i, bits in enumerate(BITS.tolist()):
+                source = list(bits)
+                source[k] = side
+                corner = boxes[:, BIT_INDEX[tuple(source)]]
+                if bits[k] == side:  # out on the wall
+                    nxt = step[corner]
+                    ok &= nxt >= 0
+                    nxt = np.maximum(nxt, 0)
+                    ok &= level[nxt] != VOLUME
+                    ok &= np.abs(local[nxt, k] - local[corner, k]) <= MAX_EDGE * h[corner]
+                    new[:, i] = nxt
+                else:
+                    new[:, i] = corner
+            out.append(new[ok])
+    walls = np.unique(np.concatenate(out).reshape(-1, 8), axis=0)
+    if len(walls) == 0:
+        return walls
+    tets = walls[:, KUHN_TETS].reshape(-1, 4)
+    volume = signed_volumes(points, tets).reshape(-1, 6) * signed_volumes(BITS.astype(float), KUHN_TETS)
+    positive = (volume > 0).all(axis=1)  # each Kuhn tet oriented as in the unit box: none flat or folded
+    from ..recombine import HEX, cell_qualities
+
+    good = positive & (cell_qualities(points, walls, HEX) >= PYRAMID_FLOOR)
+    return walls[good]
 
 
 def _empty(local, boxes, keep):

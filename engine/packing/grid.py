@@ -6,12 +6,15 @@ normal of the largest planar patch, then the normal of the largest planar patch 
 ~6 deg), and their cross product; a solid without two such patches takes the principal axes of its
 area-weighted normal tensor. So the grid follows box-like solids (plates, brackets, blocks) and not curved
 ones: there is no smoothing of a frame field through the volume, no alignment with a curve's tangent, and a
-cylinder's wall meets the grid at every angle (its layer of elements stays tetrahedra, prisms and pyramids).
+cylinder's wall meets the grid at every angle (its layer of elements is hexahedra only where the wall is within
+28 deg of a frame axis, the rest tetrahedra and pyramids).
 
 Nodes: corners; curves at equal steps of the integral of 1/h (:mod:`engine.packing.start`), except straight
 curves along a frame axis, whose nodes are the grid's columns projected onto them; planar patches at right
 angles to a frame axis get the grid's rows projected onto their plane (so that the boundary layer is boxes of
-the grid); other patches the start's thinned random nodes; the volume the centres of an octree in the frame,
+the grid); curved patches a wall node where a lattice line meets them within 28 deg of their normal
+(:func:`_wall_nodes`: the hex-core mesher's wall hexahedra), and around those the start's thinned random nodes,
+as other patches; the volume the centres of an octree in the frame,
 graded by h (a cell of size s emits where s <= 2^(1/3) h, as the lattice start, but jittered by 1e-4 h only).
 The octree lives in lattice coordinates that :func:`plane_warp` maps piecewise linearly onto the frame's, so
 that the aligned planes lie on cell boundaries and the grid's nearest layer is half a cell from each of them;
@@ -39,6 +42,13 @@ LATTICE_EXCLUSION = 0.2  # x h kept free between grid nodes and boundary nodes o
 # nearest layer is half a cell from an aligned plane: its boxes are half boxes)
 THIN = 0.6  # x h: volume nodes closer than this are thinned (two octree levels side by side)
 CURVE_EXCLUSION = 0.5  # x h kept free between projected grid nodes and the curve and corner nodes
+WALL_ALIGNED = np.cos(np.radians(28.0))  # a curved wall's normal within this of a frame axis gets that axis's
+# lattice lines projected onto it (the hex-core mesher's wall hexahedra; beyond ~30 deg the hexahedron's corner
+# angles leave the recombination's 60-120 deg)
+WALL_MIN = 0.4  # x h: a wall hexahedron at least this thick (a grid node nearer the wall along the line goes)
+WALL_GAP = 0.5  # x h: wall nodes closer than this to one another: the less aligned goes
+WALL_CLEAR = 1.0  # x h: random patch nodes kept this far from the wall nodes (no node inside a wall quad)
+WALL_TRACE = 24  # sphere-tracing steps along a lattice line to the wall
 
 
 def direction_frame(features) -> np.ndarray:
@@ -270,9 +280,22 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
             radius=sizing(projected) / 2,
         )
     )
+    # curved (non-aligned) walls: the lattice's lines that meet them nearly square end on them (wall nodes)
+    wall, wall_owner, too_near = _wall_nodes(geometry, features, sizing, frame, centres, cells, aligned)
+    if len(wall):
+        h = sizing(wall)
+        keep = (_gap(edges, wall) > CURVE_EXCLUSION * h) & (_gap(lattice_edges, wall) > LATTICE_EXCLUSION * h)
+        keep &= _gap(projected, wall) > WALL_GAP * h
+        wall, wall_owner = wall[keep], wall_owner[keep]
+    parts.append(
+        Packing(points=wall, level=np.full(len(wall), PATCH, np.int8), entity=wall_owner, radius=sizing(wall) / 2)
+    )
+    centres, cell = centres[~too_near], cell[~too_near]
     boundary = Packing.concatenate(parts)
-    on_lattice = np.vstack([lattice_edges, projected])
-    parts.append(_random_patch_nodes(geometry, features, sizing, boundary, rng, ~aligned[features.face_patch]))
+    on_lattice = np.vstack([lattice_edges, projected, wall])
+    parts.append(
+        _random_patch_nodes(geometry, features, sizing, boundary, rng, ~aligned[features.face_patch], avoid=wall)
+    )
     off_lattice = np.vstack([edges, parts[-1].points])  # kept GRID_EXCLUSION from, the lattice's LATTICE_EXCLUSION
     # the volume: the octree's centres inside, away from the boundary nodes
     world = centres @ frame
@@ -339,8 +362,72 @@ class _Skipped:
     on_surface = False
 
 
-def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, faces_mask) -> Packing:
-    """The start's patch nodes (:func:`engine.packing.start.patch_nodes`) on the faces of ``faces_mask`` only."""
+def _wall_nodes(geometry, features, sizing, frame, centres, cells, aligned):
+    """(wall nodes (w, 3), their patch (w,), (k,) the octree centres to drop): where a lattice line (frame axis k,
+    either way) from an octree centre inside meets a non-aligned patch whose normal is within WALL_ALIGNED of the
+    axis, at a distance t from the centre with WALL_MIN h <= t < its cell + WALL_MIN h (so the centre is the
+    line's last before the wall), the meeting point is a wall node; a centre nearer than WALL_MIN h to such a
+    wall along a line goes. The hex-core mesher joins a core face to its four wall nodes (a wall hexahedron)."""
+    none = (np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(len(centres), bool))
+    if aligned.all() or len(centres) == 0:
+        return none
+    world = centres @ frame
+    inside = geometry.contains(world)
+    reach = 1.0 + WALL_MIN + 0.5
+    candidates = np.flatnonzero(inside)
+    sd, _, _ = geometry._query(world[candidates])
+    candidates = candidates[sd < reach * cells[candidates].max(axis=1)]
+    if len(candidates) == 0:
+        return none
+    h = sizing(world[candidates])
+    vertices = np.asarray(geometry.mesh.vertices, float)
+    faces = np.asarray(geometry.mesh.faces, np.int64)
+    normals = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    points, owner, score = [], [], []
+    drop = np.zeros(len(centres), bool)
+    for k in range(3):
+        for sign in (-1.0, 1.0):
+            direction = sign * frame[k]
+            limit = reach * cells[candidates, k]
+            t = np.zeros(len(candidates))
+            for _ in range(WALL_TRACE):  # sphere tracing: a step of the distance to the surface never crosses it
+                d, _, _ = geometry._query(world[candidates] + t[:, None] * direction)
+                t = np.minimum(t + np.maximum(d, 0.0), limit)
+            d, face, _ = geometry._query(world[candidates] + t[:, None] * direction)
+            hit = (t < limit) & (np.abs(d) < 1e-6 * geometry.scale)
+            patch = features.face_patch[face]
+            cosine = normals[face] @ direction  # outward normal along the line
+            hit &= ~aligned[patch] & (cosine >= WALL_ALIGNED)
+            near = hit & (t < WALL_MIN * h)
+            drop[candidates[near]] = True
+            ends = hit & ~near & (t < cells[candidates, k] + WALL_MIN * h)
+            local = centres[candidates[ends]].copy()
+            local[:, k] += sign * t[ends]
+            points.append(local @ frame)
+            owner.append(patch[ends])
+            score.append(cosine[ends])
+    points, owner, score = np.concatenate(points), np.concatenate(owner), np.concatenate(score)
+    # two wall nodes closer than WALL_GAP h (two lines' ends, or one end seen from two levels): the better
+    # aligned stays
+    order = np.argsort(-score, kind="stable")
+    points, owner = points[order], owner[order]
+    radius = WALL_GAP * sizing(points)
+    keep = np.ones(len(points), bool)
+    if len(points):
+        pairs = cKDTree(points).query_pairs(float(radius.max()), output_type="ndarray")
+        if len(pairs):
+            pairs = np.sort(pairs, axis=1)
+            close = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1) < radius[pairs[:, 1]]
+            for a, b in pairs[close][np.argsort(pairs[close][:, 0], kind="stable")]:
+                if keep[a]:
+                    keep[b] = False
+    return points[keep], owner[keep].astype(np.int64), drop
+
+
+def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, faces_mask, avoid=None) -> Packing:
+    """The start's patch nodes (:func:`engine.packing.start.patch_nodes`) on the faces of ``faces_mask`` only,
+    none within WALL_CLEAR h of the ``avoid`` points (the wall nodes)."""
     mesh = geometry.mesh
     if not faces_mask.any():
         return Packing(
@@ -358,6 +445,9 @@ def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, face
     u[flip] = 1 - u[flip]
     candidates = tri[:, 0] + u[:, :1] * (tri[:, 1] - tri[:, 0]) + u[:, 1:] * (tri[:, 2] - tri[:, 0])
     patch = features.face_patch[owner]
+    if avoid is not None and len(avoid) and len(candidates):
+        clear = _gap(avoid, candidates) >= WALL_CLEAR * sizing(candidates)
+        candidates, patch = candidates[clear], patch[clear]
     all_points = np.concatenate([boundary.points, candidates])
     h = sizing(all_points)
     keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
