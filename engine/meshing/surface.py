@@ -327,18 +327,26 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable, 
 def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained):
     """(triangles, crowded nodes, lost constrained edges) of one chart. A periodic strip whose two copies
     of the seam band triangulate a nearly co-circular set differently (roundoff decides) leaves triangles
-    that pair with no neighbour: then the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
+    that pair with no neighbour, or a region on both sides of a chain (a seam through a cross bore's loop on
+    a bore's wall): then the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
     if chart.turn is None:
         return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained)
+    result, failure = None, None
     for attempt in range(SEAM_TRIES):
         turned = uv.copy()
         turned[:, 0] = (
             np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
         )
-        tri, crowded, lost = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained)
-        if len(lost) or _paired(tri, constraints):
+        try:
+            result = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained)
+        except RuntimeError as error:  # a region on both sides of its boundary, with this seam
+            failure = error
+            continue
+        if len(result[2]) or _paired(result[0], constraints):
             break
-    return tri, crowded, lost
+    if result is None:
+        raise failure
+    return result
 
 
 def _paired(tri, constraints) -> bool:

@@ -335,6 +335,14 @@ def boss_arm() -> int:
     return _cut(body, _hole(0, 0, -12, 12, 10), _hole(60, 0, -7, 7, 4))
 
 
+def cross_bored_block() -> int:
+    """A block with a bore (r 10) and a cross bore (r 6) through it at right angles: the bore's wall is a full
+    cylinder with two holes in it."""
+    return _cut(
+        occ.addBox(-30, -25, -20, 60, 50, 40), _hole(0, 0, -21, 21, 10), occ.addCylinder(-31, 0, 0, 62, 0, 0, 6)
+    )
+
+
 PARTS = {
     f.__name__: f
     for f in (
@@ -363,6 +371,7 @@ PARTS = {
         stepped_shaft,
         pillow_block,
         boss_arm,
+        cross_bored_block,
     )
 }
 
