@@ -151,7 +151,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 fix="export the part as a solid body",
             )
         faces = np.array([tag for _, tag in gm.getEntities(2)])
-        face_solids = [tuple(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist()) for tag in faces]
+        face_solids = [tuple(sorted(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist())) for tag in faces]
         shared = [k for k, owners in enumerate(face_solids) if len(owners) > 1]
         touching = len({b for k in shared for b in face_solids[k]})
         if len(solids) > 1 and not shared and not allow_multiple_solids:
@@ -171,7 +171,9 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
             )
         allow_multiple_solids = allow_multiple_solids or bool(shared)  # an assembly's solids are all bodies
         volumes = [float(gm.occ.getMass(3, int(tag))) for tag in solids] if shared else []
-        solid_names = [_solid_name(gm.getEntityName(3, tag)) or f"solid-{k + 1}" for k, tag in enumerate(solids)]
+        solid_names = _numbered(
+            [_solid_name(gm.getEntityName(3, tag)) or f"solid-{k + 1}" for k, tag in enumerate(solids)]
+        )
         cad = _CadFaces(
             source,
             model,
@@ -345,6 +347,7 @@ def _build(path: str) -> None:
         occ.healShapes(tolerance=HEAL_TOLERANCE * float(np.linalg.norm(hi - lo)))
     solids = occ.getEntities(3)
     if len(solids) > 1:
+        occ.synchronize()  # the model takes the file's names now: a fragment before that blanks some of them
         occ.fragment(solids, [])
     occ.synchronize()
 
@@ -354,6 +357,18 @@ def _solid_name(name: str) -> str:
     the product name OpenCASCADE's STEP writer gives every solid; spaces as dashes."""
     label = _label(name)
     return "" if label.startswith(UNNAMED_PRODUCT) else re.sub(r"\s+", "-", label)
+
+
+def _numbered(names: list[str]) -> list[str]:
+    """``names`` with each name that repeats numbered in file order (``nut-1``, ``nut-2``), so that every body's
+    group and interface name is its own (an assembly's STEP file names every instance of a part alike)."""
+    counts = {name: names.count(name) for name in names}
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(f"{name}-{seen[name]}" if counts[name] > 1 else name)
+    return out
 
 
 def _label(name: str) -> str:

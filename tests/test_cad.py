@@ -334,3 +334,12 @@ def test_brep_and_iges(step_files, caplog):
     _, geometry, features = solid_features(step_files["box_with_holes.igs"][0])
     assert geometry.volume == pytest.approx(step_files["box_with_holes"][1], rel=2e-3)
     assert "meshed by Gmsh instead" in caplog.text
+
+
+def test_bodies_named_alike_get_numbers_in_file_order():
+    """An assembly's STEP file names every instance of a part alike (Gmsh's as1-tu-203: eight 'nut', five
+    'bolt'); each body's group and interface names must be its own."""
+    from engine.cad import _numbered
+
+    assert _numbered(["nut", "rod", "nut", "plate", "nut"]) == ["nut-1", "rod", "nut-2", "plate", "nut-3"]
+    assert _numbered(["solid-1", "solid-2"]) == ["solid-1", "solid-2"]
