@@ -245,7 +245,7 @@ def _relax(state: LevelState) -> int:
     settings = state.run.control.settings
     interval, rounds = settings["control_interval"], settings["control_rounds"]
     damping = DAMPING_RATIO * 2.0 * np.sqrt(MASS * STIFFNESS)
-    k = NEIGHBOURS[state.level] * (2 if state.level == CURVE else 1)  # a curve's lists lose other curves' bubbles
+    k = NEIGHBOURS[state.level]
     state.frozen = state.frozen[morton_order(state.frozen)]  # neighbours close in memory: fewer cache misses
     step, built = 0, 0
     neighbours, anchor, h = None, None, None  # set at the first step's rebuild
@@ -275,8 +275,6 @@ def _relax(state: LevelState) -> int:
                 everything = np.concatenate([state.x, state.frozen])
                 h = sizing(everything)  # bubbles move < SKIN h between rebuilds: their diameters are kept till then
                 neighbours, anchor, built = neighbour_lists(everything, n, k), state.x.copy(), step
-                if state.level == CURVE:
-                    neighbours = _own_curve(neighbours, state.entity)
             if frame is None or len(frame) != n:
                 _, frame = constraint.frame(state.x, state.entity)
 
@@ -306,8 +304,6 @@ def _relax(state: LevelState) -> int:
                 if changed:
                     everything = np.concatenate([state.x, state.frozen])
                     neighbours = update_neighbours(neighbours, keep, everything, len(state.x), k)
-                    if state.level == CURVE:
-                        neighbours = _own_curve(neighbours, state.entity)
                     fresh = len(state.x) - int(keep.sum())
                     anchor = np.concatenate([anchor[keep], state.x[len(state.x) - fresh :]])
                     h = sizing(everything)
@@ -320,17 +316,6 @@ def _relax(state: LevelState) -> int:
         escaped = ~geometry.contains(state.x)
         state.x[escaped] = checked[escaped]
     return step
-
-
-def _own_curve(neighbours: np.ndarray, entity: np.ndarray) -> np.ndarray:
-    """Curve bubbles' neighbour lists (n, k) without the bubbles of other curves (entries -1); the frozen
-    corners (indices >= n) stay. Each curve is packed on its own between its corners, as in the paper: two
-    curves nearer than h (a 1 mm chamfer's edges) pushed each other's bubbles along and population control
-    deleted them, leaving gaps of 4-10 h along both edges and flat tetrahedra there."""
-    n = len(entity)
-    other = (neighbours >= 0) & (neighbours < n)
-    other[other] = entity[neighbours[other]] != np.broadcast_to(entity[:, None], neighbours.shape)[other]
-    return np.where(other, -1, neighbours)
 
 
 def _control(state: LevelState, step: int, neighbours: np.ndarray):
