@@ -446,12 +446,7 @@ def border_folds(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray) ->
     apart = (start[a] != start[b]) & (start[a] != end[b]) & (end[a] != start[b]) & (end[a] != end[b])
     d_uv = np.linalg.norm(sample_uv[near[:, 0]] - sample_uv[near[:, 1]], axis=1)
     d_xyz = np.linalg.norm(sample_xyz[near[:, 0]] - sample_xyz[near[:, 1]], axis=1)
-    tri = vertices[triangles]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    a_uv, b_uv, c_uv = (uv[triangles[:, i]] for i in range(3))
-    flat = 0.5 * np.abs(
-        (b_uv[:, 0] - a_uv[:, 0]) * (c_uv[:, 1] - a_uv[:, 1]) - (b_uv[:, 1] - a_uv[:, 1]) * (c_uv[:, 0] - a_uv[:, 0])
-    )
+    flat, area = _chart_areas(vertices, triangles, uv)  # flat > 0 where solid: conformal_map oriented uv
     solid = area > 1e-12 * area.max()
     stretch = np.sqrt(area[solid] / np.maximum(flat[solid], 1e-300)).max()  # space length per chart length
     extent = float(np.linalg.norm(np.ptp(vertices, axis=0)))
@@ -489,6 +484,14 @@ def _edge_owner(triangles: np.ndarray, start: np.ndarray, end: np.ndarray) -> np
     return order[at] // 3
 
 
+def _chart_areas(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) signed areas of the triangles in the chart ``uv`` and (F,) their areas in space."""
+    a, b, c = (uv[triangles[:, i]] for i in range(3))
+    flat = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    tri = vertices[triangles]
+    return flat, 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+
+
 def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """(V, 2) least-squares conformal map (libigl LSCM) of a connected triangle set with a border,
     counter-clockwise where the triangles are, scaled so that its median length scale is 1; None when it
@@ -502,13 +505,10 @@ def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | N
     far = int(np.argmax(np.linalg.norm(vertices[loop] - vertices[loop[0]], axis=1)))
     pinned = np.array([loop[0], loop[far]])
     uv, _ = igl.lscm(vertices, triangles, pinned, np.array([[0.0, 0.0], [1.0, 0.0]]))
-    a, b, c = (uv[triangles[:, i]] for i in range(3))
-    flat = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    flat, area = _chart_areas(vertices, triangles, uv)
     if np.sum(flat < 0) * 2 > len(flat):
         uv[:, 0] *= -1
         flat = -flat
-    tri = vertices[triangles]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     solid = area > 1e-12 * area.max()
     if not np.all(flat[solid] > 0):
         return None
