@@ -30,8 +30,8 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from .errors import GeometryError
-from .exact import Cone, CylinderSurface, Plane, Sphere, Torus
-from .features import Circle, Features, detect_features
+from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
+from .features import Circle, Cylinder, Features, detect_features
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -44,6 +44,9 @@ HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are se
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
+ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
+FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
+FIT_TOLERANCE = 1e-4  # x the model size: a non-analytic face whose points lie this near one is that surface
 
 
 @dataclass(frozen=True)
@@ -151,6 +154,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 fix="export the part as a solid body",
             )
         faces = np.array([tag for _, tag in gm.getEntities(2)])
+        size = float(np.linalg.norm(np.diff(np.reshape(gm.getBoundingBox(-1, -1), (2, 3)), axis=0)))
         face_solids = [tuple(sorted(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist())) for tag in faces]
         shared = [k for k, owners in enumerate(face_solids) if len(owners) > 1]
         touching = len({b for k in shared for b in face_solids[k]})
@@ -178,7 +182,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
             source,
             model,
             faces,
-            [_surface(gm.getType(2, tag), gm.getEntityProperties(2, tag)[1]) for tag in faces],
+            [_face_surface(gm, tag, size) for tag in faces],
             [_label(gm.getEntityName(2, tag)) or f"face-{tag}" for tag in faces],
             face_solids,
             np.array([tag for _, tag in gm.getEntities(1)]),
@@ -297,6 +301,7 @@ class _CadFaces:
                 ),
                 self.surfaces[members[0]],
                 geometry,
+                whole=len(patch.faces) == np.count_nonzero(group == group[patch.faces[0]]),
             )
             for patch, members in zip(features.patches, patch_faces)
         ]
@@ -379,11 +384,25 @@ def _label(name: str) -> str:
 @dataclass(frozen=True)
 class Surface:
     """A CAD face's type (Gmsh's name: Plane, Cylinder, Cone, Sphere, Torus, BSpline surface, ...), its
-    parameters (``gmsh.model.getEntityProperties``) and its analytic exact surface, if it has one."""
+    parameters (``gmsh.model.getEntityProperties``, or for a non-analytic face the same parameters of the
+    analytic surface it lies on) and its analytic exact surface, if it has one. ``shape``: the analytic type
+    (Plane, Cylinder, Cone, Sphere, Torus) of a non-analytic face that lies on one (:func:`_face_surface`)."""
 
     kind: str
     parameters: np.ndarray
     exact: object | None
+    shape: str | None = None
+    fitted: object | None = None  # the analytic surface a non-analytic face's points fit
+
+    @property
+    def form(self) -> str:
+        """The analytic type the face is (its own type, or the one its points fit), else its own type."""
+        return self.shape or self.kind
+
+    @property
+    def analytic(self):
+        """The face's analytic surface (its own, or the one its points fit), or None."""
+        return self.fitted if self.fitted is not None else self.exact
 
 
 def _surface(kind: str, parameters) -> Surface:
@@ -402,6 +421,50 @@ def _surface(kind: str, parameters) -> Surface:
     elif kind == "Torus" and len(p) == 8:
         exact = Torus(p[:3], _unit(p[3:6]), p[6], p[7])
     return Surface(kind, p, exact)
+
+
+def _face_surface(gm, tag: int, size: float) -> Surface:
+    """The Surface of CAD face ``tag`` (``size``: the model's). A face of another type (B-spline, Bezier,
+    surface of revolution or extrusion, offset: exporters write many cylinders and fillets so) whose own
+    points, on a FIT_POINTS x FIT_POINTS grid of its parameters, lie within FIT_TOLERANCE x ``size`` of a
+    plane, sphere, cylinder, cone or torus (:func:`engine.exact.fit_analytic`) is that surface for its kinds,
+    radius and patch grouping, and its exact surface where they lie within EXACT_TOLERANCE x ``size`` (as
+    near as an STL's vertices, engine/exact.py), else the CAD face itself."""
+    kind = gm.getType(2, tag)
+    surface = _surface(kind, gm.getEntityProperties(2, tag)[1])
+    if kind in ANALYTIC:
+        return surface
+    try:
+        (u0, v0), (u1, v1) = gm.getParametrizationBounds(2, tag)
+        u, v = np.meshgrid(np.linspace(u0, u1, FIT_POINTS), np.linspace(v0, v1, FIT_POINTS))
+        uv = np.column_stack([u.ravel(), v.ravel()]).ravel()
+        points = np.reshape(gm.getValue(2, tag, uv), (-1, 3))
+        normals = np.reshape(gm.getNormal(tag, uv), (-1, 3))
+        curvatures = np.abs(gm.getPrincipalCurvatures(tag, uv)[:2])
+    except Exception:  # Gmsh raises a bare Exception: a face it cannot evaluate keeps its own type
+        return surface
+    good = np.isfinite(points).all(axis=1) & (np.abs(np.linalg.norm(normals, axis=1) - 1) < 1e-6)
+    radii = [1 / np.median(k[good]) for k in curvatures if np.median(k[good]) > 0]
+    fitted = fit_analytic(points[good], normals[good], FIT_TOLERANCE * size, radii)
+    if fitted is None:
+        return surface
+    shape, parameters = _parameters(fitted)
+    off = float(np.linalg.norm(fitted.project(points[good]) - points[good], axis=1).max())
+    return Surface(kind, parameters, fitted if off <= EXACT_TOLERANCE * size else None, shape, fitted)
+
+
+def _parameters(surface) -> tuple[str, np.ndarray]:
+    """An analytic surface's type and parameters as Gmsh gives an analytic CAD face's (see :func:`_surface`)."""
+    if isinstance(surface, Plane):
+        return "Plane", np.r_[surface.normal, -surface.normal @ surface.point]
+    if isinstance(surface, CylinderSurface):
+        return "Cylinder", np.r_[surface.point, surface.axis, surface.radius]
+    if isinstance(surface, Cone):
+        point = surface.apex + surface.axis  # unit distance along the axis from the apex
+        return "Cone", np.r_[point, surface.axis, np.tan(surface.angle), surface.angle]
+    if isinstance(surface, Sphere):
+        return "Sphere", np.r_[surface.centre, surface.radius]
+    return "Torus", np.r_[surface.centre, surface.axis, surface.major, surface.minor]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -520,13 +583,18 @@ def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> 
 def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list) -> np.ndarray:
     """Per CAD face, its patch group (1-based): faces joined by an edge (``edge_faces``: the face indices of
     each edge) that lie on one cylinder, cone, sphere or torus and bound the same solids (``face_solids``: so
-    that a face two solids share is a patch of its own) share one."""
+    that a face two solids share is a patch of its own) share one; faces that fit one (:func:`_face_surface`)
+    within FIT_TOLERANCE x ``scale``."""
     pairs = np.array([pair for pair in edge_faces if len(pair) == 2], np.int64).reshape(-1, 2)
     same = [
         face_solids[i] == face_solids[j]
-        and surfaces[i].kind == surfaces[j].kind
-        and surfaces[i].kind in ("Cylinder", "Cone", "Sphere", "Torus")
-        and np.allclose(_canonical(surfaces[i]), _canonical(surfaces[j]), atol=SAME_SURFACE * scale)
+        and surfaces[i].form == surfaces[j].form
+        and surfaces[i].form in ("Cylinder", "Cone", "Sphere", "Torus")
+        and np.allclose(
+            _canonical(surfaces[i]),
+            _canonical(surfaces[j]),
+            atol=(FIT_TOLERANCE if surfaces[i].shape or surfaces[j].shape else SAME_SURFACE) * scale,
+        )
         for i, j in pairs
     ]
     pairs = pairs[np.asarray(same, bool)] if len(pairs) else pairs
@@ -539,26 +607,29 @@ def _canonical(surface: Surface) -> np.ndarray:
     """Parameters of a surface of revolution with its axis pointing one way and its centre moved to the axis
     point nearest the origin (two faces of one cylinder may carry different centres along it)."""
     p = surface.parameters.copy()
-    if surface.kind in ("Cylinder", "Cone", "Torus"):
+    if surface.form in ("Cylinder", "Cone", "Torus"):
         axis = _unit(p[3:6])
         axis = axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
-        if surface.kind == "Cylinder":
+        if surface.form == "Cylinder":
             p[:3] -= (p[:3] @ axis) * axis
         p[3:6] = axis
     return p
 
 
-def _face_kinds(patch, surface: Surface, geometry: Geometry):
-    """The patch with its CAD-given shape: a cylinder's exact axis and radius, a concave torus's fillet kind and
-    tube circle, a narrow cone's chamfer or countersink kind."""
-    exact = surface.exact
+def _face_kinds(patch, surface: Surface, geometry: Geometry, whole: bool = True):
+    """The patch with its CAD-given shape (the face's own or, for a non-analytic face, the analytic surface its
+    points fit): a cylinder's exact axis and radius (concave and full turn as its facets show, where they did
+    not fit one and the patch is the ``whole`` face, not a piece of a chart cut), a concave torus's fillet kind
+    and tube circle, a narrow cone's chamfer or countersink kind."""
+    exact = surface.analytic
     normals = geometry.mesh.face_normals[patch.faces]
     centres = geometry.mesh.triangles_center[patch.faces]
-    if surface.kind == "Cylinder" and patch.cylinder is not None:
-        axis = exact.axis if exact.axis @ patch.cylinder.axis > 0 else -exact.axis  # the fit's sign convention
-        cylinder = dataclasses.replace(patch.cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
+    if surface.form == "Cylinder" and (patch.cylinder is not None or whole):
+        cylinder = patch.cylinder or _cylinder(exact, centres, normals)
+        axis = exact.axis if exact.axis @ cylinder.axis > 0 else -exact.axis  # the fit's sign convention
+        cylinder = dataclasses.replace(cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
         return dataclasses.replace(patch, cylinder=cylinder)
-    if surface.kind == "Torus":
+    if surface.form == "Torus":
         tube = exact.tube_centre(centres)
         fillet = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
         return dataclasses.replace(
@@ -566,7 +637,7 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry):
             kinds=[*patch.kinds, "fillet"] if fillet else patch.kinds,
             circle=Circle(exact.centre, exact.axis, float(exact.minor)),
         )
-    if surface.kind == "Cone":
+    if surface.form == "Cone":
         rel = centres - exact.apex
         radial = rel - np.outer(rel @ exact.axis, exact.axis)
         radius = np.linalg.norm(radial, axis=1)
@@ -574,6 +645,21 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry):
             concave = np.mean(np.einsum("ij,ij->i", radial, normals)) < 0
             return dataclasses.replace(patch, kinds=[*patch.kinds, "countersink" if concave else "chamfer"])
     return patch
+
+
+def _cylinder(exact: CylinderSurface, centres: np.ndarray, normals: np.ndarray) -> Cylinder:
+    """The patch cylinder of triangles (``centres``, ``normals``) on ``exact``, concave when their normals point
+    to its axis and a full turn when they leave no gap of 30 degrees around it (as
+    :func:`engine.features.fit_cylinder` tells from the facets)."""
+    axis = exact.axis if exact.axis[np.argmax(np.abs(exact.axis))] > 0 else -exact.axis
+    rel = centres - exact.point
+    radial = rel - np.outer(rel @ axis, axis)
+    u = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis))])
+    u /= np.linalg.norm(u)
+    angles = np.sort(np.arctan2(radial @ np.cross(axis, u), radial @ u))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
+    concave = bool(np.mean(np.einsum("ij,ij->i", radial, normals)) < 0)
+    return Cylinder(exact.point, axis, float(exact.radius), concave, bool(gaps.max() < np.radians(30)))
 
 
 def _curve_edges(

@@ -304,3 +304,61 @@ def on_exact_surfaces(mesh, geometry, features):
         "nodes_kept_for_validity": int(kept.sum()),
     }
     return dataclasses.replace(mesh, points=points), stats, exact
+
+
+def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube_radii=()):
+    """The simplest Plane, Sphere, CylinderSurface, Cone or Torus that all ``points`` (k, 3) lie on within
+    ``tolerance``, or None; for a CAD face's own points (a B-spline or other non-analytic face evaluated by
+    the kernel: no faceting error) with their unit ``normals`` (k, 3, either sign). A cylinder's axis is
+    the direction its normals all miss; a cone's tangent planes all hold its apex (:func:`fit_cone`); a
+    torus's tube centres are the points moved along their normals by its tube radius, one of
+    ``tube_radii`` (the reciprocals of the face's principal curvatures), and make one circle."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    if len(points) < 9:
+        return None
+
+    def fits(surface) -> bool:
+        return bool(np.linalg.norm(surface.project(points) - points, axis=1).max() <= tolerance)
+
+    centre = points.mean(axis=0)
+    plane = Plane(centre, np.linalg.svd(points - centre, full_matrices=False)[2][2])
+    if fits(plane):
+        return plane
+    matrix = np.column_stack([2 * points, np.ones(len(points))])
+    solution, *_ = np.linalg.lstsq(matrix, (points**2).sum(axis=1), rcond=None)
+    sphere = Sphere(solution[:3], float(np.sqrt(max(solution[3] + solution[:3] @ solution[:3], 0.0))))
+    if fits(sphere):
+        return sphere
+    axis = np.linalg.svd(normals, full_matrices=False)[2][2]
+    circle = _circle_across(points, axis)
+    if circle is not None and fits(cylinder := CylinderSurface(circle[0], axis, circle[1])):
+        return cylinder
+    cone = fit_cone(points, normals, points)
+    if cone is not None and fits(cone):
+        return cone
+    for radius in tube_radii:
+        if not np.isfinite(radius) or radius <= 0:
+            continue
+        for sign in (1.0, -1.0):
+            tube = points + sign * radius * normals
+            middle = tube.mean(axis=0)
+            spread, vt = np.linalg.svd(tube - middle, full_matrices=False)[1:]
+            if spread[1] <= tolerance:  # the tube centres are one point: a sphere
+                continue
+            ring = _circle_across(tube, vt[2])
+            if ring is not None and fits(torus := Torus(ring[0], vt[2], ring[1], float(radius))):
+                return torus
+    return None
+
+
+def _circle_across(points: np.ndarray, axis: np.ndarray):
+    """(centre, radius) of the least-squares circle of ``points`` seen along ``axis``, or None."""
+    u = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis))])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    origin = points.mean(axis=0)
+    xy = np.column_stack([(points - origin) @ u, (points - origin) @ v])
+    matrix = np.column_stack([2 * xy, np.ones(len(xy))])
+    (cx, cy, c), *_ = np.linalg.lstsq(matrix, (xy**2).sum(axis=1), rcond=None)
+    radius = c + cx**2 + cy**2
+    return (origin + cx * u + cy * v, float(np.sqrt(radius))) if radius > 0 else None
