@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from scipy import sparse
 from scipy.sparse import csgraph
 
@@ -195,6 +196,8 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         with model.current() as gm:
             vertices, triangles, face_tag = _tessellate(gm, mesher)
         try:
+            if not mesher:
+                _refuse_folds(vertices, triangles, face_tag, feature_angle, source)
             geometry, features, patch_faces, curve_edges = cad.solid(
                 vertices, triangles, np.searchsorted(faces, face_tag), outer, allow_multiple_solids
             )
@@ -218,7 +221,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 raise
             log.warning(
                 "%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
-                "instead, where cylinders and cones are not recognised from the facets",
+                "instead, where a closed cylinder or cone (a hole) is cut into charts and not recognised",
                 source,
                 error.what,
             )
@@ -544,6 +547,22 @@ def _tessellate(gm, mesher: bool = False):
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     kept = double_area > 2e-12 * diagonal * longest  # validate_surface's test: height above 1e-12 x size
     return vertices, triangles[kept], face_tag[kept]
+
+
+def _refuse_folds(vertices: np.ndarray, triangles: np.ndarray, face_tag: np.ndarray, angle: float, source: str):
+    """A GeometryError where two triangles of one CAD face meet at more than ``angle`` degrees: a smooth face's
+    tessellation turns by about TURN_ANGLE between neighbours, so such an edge is a fold of the tessellator's
+    (BRepMesh folds the corner of a B-spline fillet under a B-spline face), a feature curve the CAD has not."""
+    mesh = trimesh.Trimesh(vertices, triangles, process=False)
+    pairs = mesh.face_adjacency
+    folded = (face_tag[pairs[:, 0]] == face_tag[pairs[:, 1]]) & (mesh.face_adjacency_angles > np.radians(angle))
+    if folded.any():
+        where = mesh.vertices[mesh.face_adjacency_edges[folded][0]].mean(axis=0)
+        raise GeometryError(
+            f"{int(folded.sum())} edges inside CAD faces turn by more than {angle:g} degrees, the first inside "
+            f"face-{int(face_tag[pairs[folded][0, 0]])} at ({', '.join(f'{x:.4g}' for x in where)})",
+            where=source,
+        )
 
 
 def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> np.ndarray:
