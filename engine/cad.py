@@ -48,6 +48,7 @@ NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
 FIT_TOLERANCE = 1e-4  # x the model size: a non-analytic face whose points lie this near one is that surface
+BLEND_SPREAD = 0.02  # a non-analytic face whose larger principal curvature varies less than this is a rolling ball's
 
 
 @dataclass(frozen=True)
@@ -396,6 +397,7 @@ class Surface:
     exact: object | None
     shape: str | None = None
     fitted: object | None = None  # the analytic surface a non-analytic face's points fit
+    blend: float | None = None  # a non-analytic face's one steady principal radius (a rolling ball blend's)
 
     @property
     def form(self) -> str:
@@ -432,7 +434,9 @@ def _face_surface(gm, tag: int, size: float) -> Surface:
     points, on a FIT_POINTS x FIT_POINTS grid of its parameters, lie within FIT_TOLERANCE x ``size`` of a
     plane, sphere, cylinder, cone or torus (:func:`engine.exact.fit_analytic`) is that surface for its kinds,
     radius and patch grouping, and its exact surface where they lie within EXACT_TOLERANCE x ``size`` (as
-    near as an STL's vertices, engine/exact.py), else the CAD face itself."""
+    near as an STL's vertices, engine/exact.py), else the CAD face itself. One that fits none but whose
+    smaller principal radius stays within BLEND_SPREAD of one value is a rolling ball's blend of that
+    radius (a fillet along a curve that is not a circle, as where two pipes meet)."""
     kind = gm.getType(2, tag)
     surface = _surface(kind, gm.getEntityProperties(2, tag)[1])
     if kind in ANALYTIC:
@@ -450,7 +454,9 @@ def _face_surface(gm, tag: int, size: float) -> Surface:
     radii = [1 / np.median(k[good]) for k in curvatures if np.median(k[good]) > 0]
     fitted = fit_analytic(points[good], normals[good], FIT_TOLERANCE * size, radii)
     if fitted is None:
-        return surface
+        ball = 1 / curvatures[:, good].max(axis=0)  # the smaller principal radius at each point
+        steady = len(ball) and np.isfinite(ball).all() and np.ptp(ball) <= BLEND_SPREAD * np.median(ball)
+        return dataclasses.replace(surface, blend=float(np.median(ball))) if steady else surface
     shape, parameters = _parameters(fitted)
     off = float(np.linalg.norm(fitted.project(points[good]) - points[good], axis=1).max())
     return Surface(kind, parameters, fitted if off <= EXACT_TOLERANCE * size else None, shape, fitted)
@@ -638,8 +644,8 @@ def _canonical(surface: Surface) -> np.ndarray:
 def _face_kinds(patch, surface: Surface, geometry: Geometry, whole: bool = True):
     """The patch with its CAD-given shape (the face's own or, for a non-analytic face, the analytic surface its
     points fit): a cylinder's exact axis and radius (concave and full turn as its facets show, where they did
-    not fit one and the patch is the ``whole`` face, not a piece of a chart cut), a concave torus's fillet kind
-    and tube circle, a narrow cone's chamfer or countersink kind."""
+    not fit one and the patch is the ``whole`` face, not a piece of a chart cut), a concave torus's or rolling
+    ball blend's fillet kind and tube circle, a narrow cone's chamfer or countersink kind."""
     exact = surface.analytic
     normals = geometry.mesh.face_normals[patch.faces]
     centres = geometry.mesh.triangles_center[patch.faces]
@@ -656,6 +662,15 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, whole: bool = True)
             kinds=[*patch.kinds, "fillet"] if fillet else patch.kinds,
             circle=Circle(exact.centre, exact.axis, float(exact.minor)),
         )
+    if surface.blend is not None:
+        mesh = geometry.mesh
+        inside = np.isin(mesh.face_adjacency, patch.faces).all(axis=1)
+        turn = mesh.face_adjacency_angles[inside]
+        if turn[~mesh.face_adjacency_convex[inside]].sum() > turn[mesh.face_adjacency_convex[inside]].sum():
+            # a concave blend: a fillet; its tube radius is the ball's (it has no one axis: the patch's normal)
+            circle = Circle(patch.centroid, patch.normal, surface.blend)
+            return dataclasses.replace(patch, kinds=[*patch.kinds, "fillet"], circle=circle)
+        return patch
     if surface.form == "Cone":
         rel = centres - exact.apex
         radial = rel - np.outer(rel @ exact.axis, exact.axis)

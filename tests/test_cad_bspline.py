@@ -8,7 +8,8 @@ Parts: STEP files written here by Gmsh's OpenCASCADE with every face converted t
 non-rational B-spline, a few micrometres off its cylinder). Checked: each face's type is a B-spline, the holes,
 fillets (a cylinder and a torus) and countersink with the radii of the same part's analytic faces, a hole of
 two B-spline halves one hole, the ``fuzzymesh features`` listing, and a part meshed end to end onto its CAD
-faces. Also a freeform cap whose tessellation OpenCASCADE folds: Gmsh's 2-D mesh is taken instead.
+faces. Also a tee's fillet along a curve that is not a circle (a rolling ball's blend: a fillet of its
+radius), and a freeform cap whose tessellation OpenCASCADE folds: Gmsh's 2-D mesh is taken instead.
 """
 
 from __future__ import annotations
@@ -95,6 +96,14 @@ def freeform_cap():
     return make_parts._fillet(block, make_parts._curves(lambda b: b[3] - b[0] < 1e-6 and b[4] - b[1] < 1e-6), 3)
 
 
+def tee():
+    """A solid tee: a bar of radius 25 along x, a branch of radius 20 along z, joined by a fillet of radius 6
+    along their intersection curve (not a circle: a rolling ball's blend, two B-spline faces)."""
+    tee = make_parts._fuse(occ.addCylinder(-80, 0, 0, 160, 0, 0, 25), occ.addCylinder(0, 0, 0, 0, 0, 80, 20))
+    occ.synchronize()
+    return make_parts._fillet(tee, make_parts._curves(lambda b: b[2] > 5 and b[5] < 26 and 39 < b[3] - b[0] < 41), 6)
+
+
 PARTS = {"bracket": make_parts.bracket, "boss_plate": boss_plate, "split_hole": split_hole}
 
 
@@ -109,7 +118,7 @@ def step_files(tmp_path_factory):
     previous = gmsh.model.getCurrent()
     out = {}
     try:
-        for name, build in [*PARTS.items(), ("spline_hole", spline_hole), ("freeform_cap", freeform_cap)]:
+        for name, build in [*PARTS.items(), ("spline_hole", spline_hole), ("freeform_cap", freeform_cap), ("tee", tee)]:
             gmsh.model.add(f"test-cad-bspline-{name}")
             tag = build()
             occ.synchronize()
@@ -171,6 +180,16 @@ def test_a_hole_lofted_through_splines_is_a_hole_on_its_cad_face(step_files):
     ((k, hole),) = [(k, p) for k, p in enumerate(features.patches) if p.surface == "BSpline surface"]
     assert hole.kinds == ["hole"] and hole.cylinder.radius == pytest.approx(6.0, rel=1e-4)
     assert isinstance(features.exact[0][k], CadEntity)
+
+
+def test_a_rolling_ball_blend_is_a_fillet_of_its_radius(step_files):
+    """The tee's fillet fits no analytic surface; its smaller principal radius stays within 0.6 % of 6 over
+    both faces (OpenCASCADE's approximation of the rolling ball): two fillet patches of radius 6."""
+    _, _, features = solid_features(step_files["tee"][0])
+    blends = [p for p in features.patches if p.surface == "BSpline surface"]
+    assert len(blends) == 2 and all(p.kinds == ["fillet"] for p in blends)
+    assert [p.circle.radius for p in blends] == pytest.approx([6, 6], rel=2e-3)
+    assert not [p for p in features.patches if p.kinds and p.surface != "BSpline surface"]  # convex bars
 
 
 def test_fit_analytic_tells_the_shapes_apart():
