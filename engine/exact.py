@@ -8,6 +8,16 @@ analytic surface to within EXACT_TOLERANCE x the model size is that surface; its
 peaks at the polygon's corners that refinement never removes). Curve nodes go onto the intersection of
 the exact surfaces of the patches the curve borders (alternating projections); corners stay where the
 input has them. Patches that fit no analytic surface (freeform, or blends of several) keep the facets.
+
+An STL's vertices lie on the surface but its facets do not: moving the nodes onto the exact surface moves the
+mesh off the input by up to the facets' sagitta. Where the mesh is finer than the faceting (a 15 degree export,
+a small local size) that is more than the boundary may stray from the input (the acceptance gate's Hausdorff
+bound is a fraction of h), and where only one side of a thin wall fits a surface it changes the wall's
+thickness and the solid's volume. So a fitted surface is used only where the input's facets lie within
+FAITHFUL x the local element size of it, or within the mesh's own chordal deviation there (its element size
+squared over 8 radii: where the mesh is the coarser faceting, nodes on the surface bring it nearer the
+input, not further) (:func:`faithful`). Patches of one surface (a sphere cut into several patches) are
+judged together: all of them move or none. The exact surfaces a CAD model gives are used as they are.
 """
 
 from __future__ import annotations
@@ -23,6 +33,14 @@ from .mesh import signed_volumes
 
 EXACT_TOLERANCE = 1e-6  # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
 ROUNDS = 8  # alternating projections onto the surfaces a curve borders
+FAITHFUL = 0.05  # x the local element size: how far the input's facets may lie from the surface nodes go onto
+SAME_SURFACE = 1e-4  # x the model size, and radians: two patches' fitted surfaces this close are one surface
+# barycentric points of a facet where its distance from the surface is sampled: centroid, edge midpoints, and
+# between them (the facet's deepest point on a cylinder, sphere or cone lies inside it or on an edge)
+FACET_SAMPLES = np.array(
+    [[1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]]
+    + [[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]]
+)
 
 
 @dataclass(frozen=True)
@@ -276,11 +294,112 @@ def onto_intersection(surfaces: list, x: np.ndarray) -> np.ndarray:
     return x
 
 
+def facet_deviation(surface, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(f,) how far each facet (``corners`` (f, 3, 3)) strays from ``surface`` (the largest distance of its
+    FACET_SAMPLES from it: the sagitta, for a facet whose corners lie on the surface) and (f, 3) the point
+    where."""
+    points = np.einsum("kj,fjd->fkd", FACET_SAMPLES, corners)
+    flat = points.reshape(-1, 3)
+    distance = np.linalg.norm(surface.project(flat) - flat, axis=1).reshape(len(corners), -1)
+    deepest = distance.argmax(axis=1)
+    return distance[np.arange(len(corners)), deepest], points[np.arange(len(corners)), deepest]
+
+
+def element_size(mesh, points: np.ndarray) -> np.ndarray:
+    """(k,) the mesh's element size at ``points`` (k, 3) on its boundary: the mean length of the boundary edges
+    at the nearest boundary node (the mesh's own h there; inf for a mesh without boundary faces)."""
+    from scipy.spatial import cKDTree
+
+    if len(mesh.boundary) == 0:
+        return np.full(len(points), np.inf)
+    edges = np.unique(np.sort(mesh.boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    length = np.linalg.norm(mesh.points[edges[:, 0]] - mesh.points[edges[:, 1]], axis=1)
+    total = np.bincount(edges.ravel(), np.repeat(length, 2), len(mesh.points))
+    count = np.bincount(edges.ravel(), minlength=len(mesh.points))
+    nodes = np.flatnonzero(count)
+    return (total[nodes] / count[nodes])[cKDTree(mesh.points[nodes]).query(points)[1]]
+
+
+def same_surface(a, b, tolerance: float) -> bool:
+    """Whether the curved surfaces ``a`` and ``b`` (fitted to two patches) are one surface: positions and
+    radii within ``tolerance``, directions within SAME_SURFACE radians."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, Sphere):
+        return bool(np.linalg.norm(a.centre - b.centre) <= tolerance and abs(a.radius - b.radius) <= tolerance)
+    if isinstance(a, CylinderSurface):
+        offset = b.point - a.point
+        return bool(
+            np.linalg.norm(np.cross(a.axis, b.axis)) <= SAME_SURFACE
+            and np.linalg.norm(offset - (offset @ a.axis) * a.axis) <= tolerance
+            and abs(a.radius - b.radius) <= tolerance
+        )
+    if isinstance(a, Cone):
+        return bool(
+            np.linalg.norm(a.apex - b.apex) <= tolerance
+            and a.axis @ b.axis >= 1 - SAME_SURFACE**2 / 2
+            and abs(a.angle - b.angle) <= SAME_SURFACE
+        )
+    return False
+
+
+def radius_across(surface, points: np.ndarray) -> np.ndarray:
+    """(k,) the smallest radius of curvature of ``surface`` at (the closest points to) ``points`` (k, 3)."""
+    if isinstance(surface, Sphere | CylinderSurface):
+        return np.full(len(points), surface.radius)
+    if isinstance(surface, Cone):  # across the generators: the distance from the axis over cos(half-angle)
+        rel = points - surface.apex
+        across = np.linalg.norm(rel - np.outer(rel @ surface.axis, surface.axis), axis=1)
+        return across / np.cos(surface.angle)
+    return np.full(len(points), np.inf)
+
+
+def faithful(surfaces: list, geometry, features, mesh) -> tuple[list, dict]:
+    """``surfaces`` (per patch) with None for every curved surface the input's facets stray from
+    (:func:`facet_deviation`) by more than both FAITHFUL x the mesh's element size L there
+    (:func:`element_size`) and the mesh's own chordal deviation L^2 / (8 R) (R: :func:`radius_across`);
+    patches whose surfaces coincide (:func:`same_surface`) are judged as one, by the worst of them. Planes
+    stay (their facets lie on them). Also returns what it found: how many patches were left on the facets,
+    and the largest ratio of the facets' deviation to that allowance among the patches kept and among those
+    left."""
+    curved = [p for p, s in enumerate(surfaces) if s is not None and not isinstance(s, Plane)]
+    ratio = {}
+    corners = geometry.vertices[geometry.faces]
+    for p in curved:
+        deviation, where = facet_deviation(surfaces[p], corners[features.patches[p].faces])
+        size = element_size(mesh, where)
+        allowed = np.maximum(FAITHFUL * size, size**2 / (8 * radius_across(surfaces[p], where)))
+        ratio[p] = float((deviation / allowed).max(initial=0.0))
+    tolerance = SAME_SURFACE * geometry.scale
+    group = {p: p for p in curved}
+    for i, p in enumerate(curved):
+        for q in curved[:i]:
+            if group[q] == q and same_surface(surfaces[p], surfaces[q], tolerance):
+                group[p] = q
+                break
+    worst = {}
+    for p in curved:
+        worst[group[p]] = max(worst.get(group[p], 0.0), ratio[p])
+    left = [p for p in curved if worst[group[p]] > 1]
+    out = [None if p in left else s for p, s in enumerate(surfaces)]
+    stats = {
+        "patches_left_on_facets": len(left),
+        "facet_deviation_kept": max((ratio[p] for p in curved if p not in left), default=0.0),
+        "facet_deviation_left": max((ratio[p] for p in left), default=0.0),
+    }
+    return out, stats
+
+
 def on_exact_surfaces(mesh, geometry, features):
     """The mesh with its curve and patch nodes on their exact surfaces (module docstring); nodes of a tet
     the move would leave with a non-positive volume stay where they were. Returns (mesh, stats, exact):
-    ``exact`` the fitted surfaces (:func:`fit_exact`), for the stages after this one (the 10-node elements)."""
-    exact = fit_exact(geometry, features)
+    ``exact`` the surfaces used (those of :func:`fit_exact`, less the ones an input faceting strays from,
+    :func:`faithful`), for the stages after this one (the 10-node elements)."""
+    surfaces = exact_surfaces(geometry, features)
+    faithful_stats = {}
+    if features.exact is None:  # an input faceting, not a CAD model's surfaces
+        surfaces, faithful_stats = faithful(surfaces, geometry, features, mesh)
+    exact = ExactSurfaces(surfaces, curve_surfaces(geometry, features, surfaces))
     surfaces, along = exact
     points = mesh.points.copy()
     for level, table in (("patch", [[s] if s is not None else [] for s in surfaces]), ("curve", along)):
@@ -302,6 +421,7 @@ def on_exact_surfaces(mesh, geometry, features):
         "nodes_moved": int((distance > 0).sum()),
         "largest_move": float(distance.max(initial=0.0)),
         "nodes_kept_for_validity": int(kept.sum()),
+        **faithful_stats,
     }
     return dataclasses.replace(mesh, points=points), stats, exact
 
