@@ -39,6 +39,7 @@ log = logging.getLogger(__name__)
 
 CAD_FORMATS = (".step", ".stp", ".iges", ".igs", ".brep")
 TURN_ANGLE = 10.0  # tessellation: degrees of turn per facet of a curved face
+RETRY_TURN = 15.0  # BRepMesh tried again at this turn (its folds depend on it) before Gmsh's mesher
 DEFLECTION = 1e-3  # tessellation: largest sagitta, x the model size
 MESHER_SIZE = 40  # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
 HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are sewn across gaps this wide
@@ -193,9 +194,14 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         cad.edge_names = [_label(gm.getEntityName(1, tag)) or f"edge-{tag}" for tag in cad.edges]
         cad.edge_faces = [np.searchsorted(faces, gm.getAdjacencies(1, tag)[0]).tolist() for tag in cad.edges]
     outer = np.array([len(owners) == 1 for owners in face_solids])
-    for mesher in (False, True):
-        with model.current() as gm:
-            vertices, triangles, face_tag = _tessellate(gm, mesher)
+    for attempt, (mesher, turn) in enumerate(((False, TURN_ANGLE), (False, RETRY_TURN), (True, TURN_ANGLE))):
+        if attempt == 1:  # BRepMesh again, on a fresh copy of the model (its first tessellation stays with it)
+            with CadModel(model.path, f"{model.name}#retry").current() as gm:
+                vertices, triangles, face_tag = _tessellate(gm, mesher, turn)
+                gm.remove()
+        else:
+            with model.current() as gm:
+                vertices, triangles, face_tag = _tessellate(gm, mesher, turn)
         try:
             if not mesher:
                 _refuse_folds(vertices, triangles, face_tag, feature_angle, source)
@@ -220,6 +226,9 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         except GeometryError as error:
             if mesher:
                 raise
+            if attempt == 0:
+                log.info("%s: OpenCASCADE's tessellation is not a valid solid (%s): tried again", source, error.what)
+                continue
             log.warning(
                 "%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
                 "instead, where a closed cylinder or cone (a hole) is cut into charts and not recognised",
@@ -494,12 +503,13 @@ def _options(numbers: dict):
             gmsh.option.setNumber(key, value)
 
 
-def _tessellate(gm, mesher: bool = False):
+def _tessellate(gm, mesher: bool = False, turn: float = TURN_ANGLE):
     """The CAD faces as triangles: (vertices (n, 3), triangles (t, 3), CAD face tag per triangle (t,)), each
     face's triangles as the tessellator orients it, degenerate ones left out, faces sharing their edges' points.
-    OpenCASCADE's tessellation (BRepMesh, as Gmsh exports STL: TURN_ANGLE, sagitta at most DEFLECTION x the
-    model size), whose strips along cylinders and cones the feature detection recognises; or, with ``mesher``,
-    Gmsh's 2-D mesh (as many elements per turn, sides of at most the model size / MESHER_SIZE)."""
+    OpenCASCADE's tessellation (BRepMesh, as Gmsh exports STL: ``turn`` degrees, sagitta at most DEFLECTION x
+    the model size; made once per model, so another turn needs a fresh model), whose strips along cylinders
+    and cones the feature detection recognises; or, with ``mesher``, Gmsh's 2-D mesh (as many elements per
+    turn, sides of at most the model size / MESHER_SIZE)."""
     import gmsh
 
     lo, hi = np.reshape(gm.getBoundingBox(-1, -1), (2, 3))
@@ -534,7 +544,7 @@ def _tessellate(gm, mesher: bool = False):
                     "Mesh.StlOneSolidPerSurface": 1,
                     "Mesh.StlLinearDeflectionRelative": 0,
                     "Mesh.StlLinearDeflection": DEFLECTION * diagonal,
-                    "Mesh.StlAngularDeflection": np.radians(TURN_ANGLE),
+                    "Mesh.StlAngularDeflection": np.radians(turn),
                 }
             ),
         ):
