@@ -343,6 +343,12 @@ def cross_bored_block() -> int:
     )
 
 
+def thin_chamfer_plate() -> int:
+    """A plate 140 x 90 x 12 whose top edges are chamfered 1 mm: a face four times narrower than the default size
+    between two close parallel edges."""
+    return _chamfer(occ.addBox(0, 0, 0, 140, 90, 12), _curves(_at_z(12)), 1)
+
+
 PARTS = {
     f.__name__: f
     for f in (
@@ -372,6 +378,7 @@ PARTS = {
         pillow_block,
         boss_arm,
         cross_bored_block,
+        thin_chamfer_plate,
     )
 }
 
