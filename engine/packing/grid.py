@@ -15,7 +15,8 @@ angles to a frame axis get the grid's rows projected onto their plane (so that t
 the grid); curved patches a wall node where a lattice line meets them within 28 deg of their normal
 (:func:`_wall_nodes`: the hex-core mesher's wall hexahedra), and around those the start's thinned random nodes,
 as other patches; the volume the centres of an octree in the frame,
-graded by h (a cell of size s emits where s <= 2^(1/3) h, as the lattice start, but jittered by 1e-4 h only).
+graded by h (a cell of size s emits where s <= 2^(1/3) h, as the lattice start, but jittered by 1e-4 h only),
+whose coarse islands and one-cell inlets among finer cells are split (:func:`_smooth_levels`: fewer level steps).
 The octree lives in lattice coordinates that :func:`plane_warp` maps piecewise linearly onto the frame's, so
 that the aligned planes lie on cell boundaries and the grid's nearest layer is half a cell from each of them;
 grid nodes are kept ``LATTICE_EXCLUSION`` h from the boundary nodes on the lattice's lines and
@@ -48,6 +49,9 @@ WALL_ALIGNED = np.cos(np.radians(28.0))  # a curved wall's normal within this of
 WALL_MIN = 0.4  # x h: a wall hexahedron at least this thick (a grid node nearer the wall along the line goes)
 WALL_GAP = 0.5  # x h: wall nodes closer than this to one another: the less aligned goes
 WALL_CLEAR = 1.0  # x h: random patch nodes kept this far from the wall nodes (no node inside a wall quad)
+SMOOTH_FINER = 2  # a leaf with at least this many face neighbours in the solid of a finer level, and no fewer
+# than of its own or a coarser one, is split (:func:`_smooth_levels`)
+SMOOTH_ROUNDS = 50  # at most (the junction-edge example at size 12 settles in 10)
 WALL_TRACE = 24  # sphere-tracing steps along a lattice line to the wall
 WALL_SPAN = 0.9  # near a cylinder along a frame axis, octree cells at most this x the widest chord of radius R
 # that stays within the surface mesher's DEVIATION h of its arc, sqrt(8 DEVIATION h R): a wider wall quad gets a
@@ -163,7 +167,7 @@ def _wall_limit(features, frame, root):
     return limit
 
 
-def _octree_centres(lo, hi, sizing, frame, warp, limit=None):
+def _octree_centres(lo, hi, sizing, frame, warp, limit=None, relevant=None):
     """(centres (k, 3) in frame coordinates, cell sizes (k, 3) along each axis, the root cells' corner (3,) in
     lattice coordinates, their size): the octree cells, in the lattice coordinates of ``warp``, whose size
     matches h. A cell of level l (size ``size / 2**l``) has its centre at ``origin + (i + 1/2) size / 2**l`` on
@@ -180,7 +184,7 @@ def _octree_centres(lo, hi, sizing, frame, warp, limit=None):
     axes = [lo[k] + (np.arange(counts[k]) + 0.5) * size for k in range(3)]
     centres = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
     octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
-    out, sizes = [], []
+    leaves, level = [], 0
     while len(centres):
         cell = size * warp.slope(centres)
         world = warp(centres) @ frame
@@ -188,11 +192,61 @@ def _octree_centres(lo, hi, sizing, frame, warp, limit=None):
         done = cell.max(axis=1) <= h * SPACING_SLACK
         if limit is not None:
             done &= cell.max(axis=1) <= limit(world, h)
-        out.append(centres[done])
-        sizes.append(cell[done])
+        leaves.append((level, centres[done]))
         size /= 2
+        level += 1
         centres = (centres[~done][:, None, :] + 0.5 * size * octants[None]).reshape(-1, 3)
+    if relevant is not None:
+        leaves = _smooth_levels(leaves, origin, root, warp, frame, relevant)
+    out = [c for _, c in leaves]
+    sizes = [(root / 2**lv) * warp.slope(c) for lv, c in leaves]
     return warp(np.concatenate(out)), np.concatenate(sizes), origin, root
+
+
+def _smooth_levels(leaves, origin, root, warp, frame, relevant):
+    """The octree's leaves with coarse islands and inlets filled: a leaf (of the solid, ``relevant``) at least
+    half of whose face neighbours in the solid are of a finer level is split, in rounds. Only splits: no cell
+    gets larger than h asks. Each level step costs a layer of tetrahedra and pyramids ~0.75 coarse cells wide
+    between the boxes of the two levels; a coarse cell among finer ones (a coarse island, a one-cell inlet of
+    the staircase) is such a layer on most of its sides."""
+    octants = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    steps = np.vstack([np.eye(3), -np.eye(3)])
+    depth = len(leaves)
+    for _ in range(SMOOTH_ROUNDS):
+        by_level = {lv: c for lv, c in leaves if len(c)}
+        keys = {}
+        for lv, c in by_level.items():
+            index = np.floor((c - origin) / (root / 2**lv)).astype(np.int64)
+            keys[lv] = {tuple(i) for i in index.tolist()}
+        split = {}
+        for lv, c in by_level.items():
+            inside = relevant(warp(c) @ frame)
+            finer = np.zeros(len(c), int)
+            other = np.zeros(len(c), int)
+            s = root / 2**lv
+            for step in steps:
+                probe = c + step * (0.5 * s + 0.25 * root / 2 ** (depth - 1))
+                ok = relevant(warp(probe) @ frame)
+                found = np.full(len(c), -1)
+                for m in range(depth):
+                    if m not in keys:
+                        continue
+                    index = np.floor((probe - origin) / (root / 2**m)).astype(np.int64)
+                    hit = np.array([tuple(i) in keys[m] for i in index.tolist()], bool) & (found < 0)
+                    found[hit] = m
+                finer += ok & (found > lv)
+                other += ok & (found >= 0) & (found <= lv)
+            split[lv] = inside & (finer >= SMOOTH_FINER) & (finer >= other)
+        if not any(v.any() for v in split.values()):
+            break
+        new = {lv: [c[~split[lv]]] for lv, c in by_level.items()}
+        for lv, c in by_level.items():
+            if split[lv].any():
+                children = (c[split[lv]][:, None, :] + 0.25 * root / 2**lv * octants[None]).reshape(-1, 3)
+                new.setdefault(lv + 1, []).append(children)
+        depth = max(depth, max(new) + 1)
+        leaves = sorted((lv, np.concatenate(parts)) for lv, parts in new.items())
+    return leaves
 
 
 def _on_faces(points, vertices, faces, tolerance) -> np.ndarray:
@@ -234,7 +288,9 @@ def pack_grid(geometry, features, sizing, *, seed: int = 0, knowledge=None) -> P
     root = sizing.h_max * SPACING_SLACK * (1 - 1e-9)
     warp = plane_warp(features, frame, root)
     limit = _wall_limit(features, frame, root)
-    centres, cells, origin, root = _octree_centres(local.min(axis=0), local.max(axis=0), sizing, frame, warp, limit)
+    centres, cells, origin, root = _octree_centres(
+        local.min(axis=0), local.max(axis=0), sizing, frame, warp, limit, geometry.contains
+    )
     cell = cells.max(axis=1)
     tolerance = 1e-6 * geometry.scale
 
