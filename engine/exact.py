@@ -363,12 +363,13 @@ def faithful(surfaces: list, geometry, features, mesh) -> tuple[list, dict]:
     and the largest ratio of the facets' deviation to that allowance among the patches kept and among those
     left."""
     curved = [p for p, s in enumerate(surfaces) if s is not None and not isinstance(s, Plane)]
-    ratio = {}
     corners = geometry.vertices[geometry.faces]
-    for p in curved:
-        deviation, where = facet_deviation(surfaces[p], corners[features.patches[p].faces])
-        size = element_size(mesh, where)
-        allowed = np.maximum(FAITHFUL * size, size**2 / (8 * radius_across(surfaces[p], where)))
+    found = [facet_deviation(surfaces[p], corners[features.patches[p].faces]) for p in curved]
+    where = [x for _, x in found]
+    sizes = element_size(mesh, np.vstack(where)) if curved else np.zeros(0)  # one lookup for all patches
+    ratio = {}
+    for p, (deviation, x), size in zip(curved, found, np.split(sizes, np.cumsum([len(x) for x in where])[:-1])):
+        allowed = np.maximum(FAITHFUL * size, size**2 / (8 * radius_across(surfaces[p], x)))
         ratio[p] = float((deviation / allowed).max(initial=0.0))
     tolerance = SAME_SURFACE * geometry.scale
     group = {p: p for p in curved}
