@@ -192,6 +192,8 @@ def _impose(packing, geometry, features, keys, curve_edges, imposed, merged):
             level[k], entity[k] = CORNER, corner_index[k]
         elif body_level in (CURVE, CORNER) and key and (curves := {edge_curve[e] for e in key if e in edge_curve}):
             level[k], entity[k] = CURVE, min(curves)
+        elif body_level == CORNER and (curve := _curve_through(features, x[k], tol)) >= 0:
+            level[k], entity[k] = CURVE, curve  # a corner of the body that meshed it, on a curve of this one
         elif body_level == PATCH:
             level[k], entity[k] = PATCH, patch_of_node[int(node)]
         else:
@@ -224,6 +226,21 @@ def _impose(packing, geometry, features, keys, curve_edges, imposed, merged):
     triangles = np.concatenate([local[t][:, ::-1] for _, t in imposed])
     patch = np.concatenate([np.full(len(t), p) for p, t in imposed])
     return out, (triangles, patch), held
+
+
+def _curve_through(features, x: np.ndarray, tol: float) -> int:
+    """The first feature curve whose polyline passes within ``tol`` of the point ``x``, else -1 (a corner of
+    one body where the other's curve runs straight on: the square rim of a face one body shares with a
+    coplanar face of the other)."""
+    for c, curve in enumerate(features.curves):
+        a = curve.points
+        b = np.roll(a, -1, axis=0) if curve.closed else a[1:]
+        a = a if curve.closed else a[:-1]
+        span = b - a
+        t = np.clip(((x - a) * span).sum(axis=1) / np.maximum((span * span).sum(axis=1), 1e-300), 0.0, 1.0)
+        if len(a) and np.linalg.norm(a + t[:, None] * span - x, axis=1).min() <= tol:
+            return c
+    return -1
 
 
 def _radius(packing, x) -> np.ndarray:

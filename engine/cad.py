@@ -303,8 +303,12 @@ class _CadFaces:
         edge_faces = [[k for k in pair if keep[k]] for pair in self.edge_faces]
         group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids)
         group = np.unique(group[face], return_inverse=True)[1] + 1  # per triangle, numbered among the kept faces
-        features = detect_features(
-            geometry, self.feature_angle, [lambda _, g=g: group == g for g in range(1, group.max() + 1)]
+        first = np.unique(group, return_index=True)[1]  # a triangle of each group
+        features = detect_features(  # a cylinder's faces, whose facets may fit none (B-spline, short), stay whole
+            geometry,
+            self.feature_angle,
+            [lambda _, g=g: group == g for g in range(1, group.max() + 1)],
+            [self.surfaces[k].form == "Cylinder" for k in face[first]],
         )
         patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
         patches = [

@@ -149,7 +149,7 @@ class Features:
         return sorted({n for group in (self.corners, self.curves, self.patches) for f in group for n in f.names})
 
 
-def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups=()) -> Features:
+def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=()) -> Features:
     """Find corners, feature curves and patches of ``geometry`` (angles in degrees).
 
     ``face_groups`` are functions ``triangles (F, 3, 3) -> bool mask``; each
@@ -161,7 +161,8 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     neither a plane nor a cylinder is cut into charts (see :func:`chart_pieces`):
     its planar faces, its cylinders (a fillet, a hole wall) and pieces of
     bounded normal spread, each of which can be flattened; the cuts are
-    smooth (``sharp=False``) curves.
+    smooth (``sharp=False``) curves. ``on_cylinder``: per face group, whether it is known to lie on a
+    cylinder (a CAD face's surface, where a short or B-spline face's facets fit none): never cut into charts.
     """
     mesh = geometry.mesh
     threshold = np.radians(feature_angle)
@@ -184,10 +185,12 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
             group[_half(mesh, patches[p].faces)] = k
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
+    cylindrical = np.zeros(group.max() + 1, bool)
+    cylindrical[1 : len(on_cylinder) + 1] = np.asarray(on_cylinder, bool)[: group.max()]
     pieces = [
         piece
         for patch in patches
-        if not patch.planar and patch.cylinder is None
+        if not patch.planar and patch.cylinder is None and not cylindrical[group[patch.faces[0]]]
         for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp, geometry.source)
     ]
     if pieces:
