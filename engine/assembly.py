@@ -13,6 +13,8 @@ the interface triangles by name.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -33,9 +35,11 @@ def mesh_assembly(packer, mesher, geometry, features, sizing, *, seed: int = 0, 
     merged = _Merged()
     done: dict = {}  # frozenset of CAD face tags -> (k, 3) merged node indices, outward for the body that meshed it
     packings, offset = [], 0
+    corners = [np.array([g.vertices[c.vertex] for c in f.corners]).reshape(-1, 3) for g, f in assembly.bodies]
     for b, (body_geometry, body_features) in enumerate(assembly.bodies):
         patch_faces, curve_edges = assembly.patch_faces[b], assembly.curve_edges[b]
         packing = packer(body_geometry, body_features, sizing, seed=seed, knowledge=knowledge)
+        packing = _on_corners(packing, body_geometry, body_features, corners[:b] + corners[b + 1 :], tol)
         keys = [frozenset(f) for f in patch_faces]
         imposed = [(p, done[k]) for p, k in enumerate(keys) if k in done]
         prescribed, held = None, np.zeros(0, np.int64)
@@ -126,7 +130,7 @@ class _Merged:
                 if corner_at is not None and (hit := corner_at.query(self.points[node]))[0] <= tol:
                     level[node], entity[node] = CORNER, hit[1]
                 elif body_level == CURVE and (curves := {edge_curve[e] for e in key if e in edge_curve}):
-                    level[node], entity[node] = CURVE, min(curves)
+                    level[node], entity[node] = CURVE, _nearest_curve(features, curves, self.points[node])
         # a node left in the volume that lies on the union's surface (a corner of one body only): its patch
         on_surface = np.flatnonzero((level == VOLUME) & (geometry.closest_point(self.points)[1] <= tol))
         if len(on_surface):
@@ -191,7 +195,7 @@ def _impose(packing, geometry, features, keys, curve_edges, imposed, merged):
         if corner_distance[k] <= tol:
             level[k], entity[k] = CORNER, corner_index[k]
         elif body_level in (CURVE, CORNER) and key and (curves := {edge_curve[e] for e in key if e in edge_curve}):
-            level[k], entity[k] = CURVE, min(curves)
+            level[k], entity[k] = CURVE, _nearest_curve(features, curves, x[k])
         elif body_level == CORNER and (curve := _curve_through(features, x[k], tol)) >= 0:
             level[k], entity[k] = CURVE, curve  # a corner of the body that meshed it, on a curve of this one
         elif body_level == PATCH:
@@ -228,19 +232,52 @@ def _impose(packing, geometry, features, keys, curve_edges, imposed, merged):
     return out, (triangles, patch), held
 
 
+def _on_corners(packing, geometry, features, others: list, tol: float):
+    """The packing with a node of each of its curves that passes through a corner of another body (``others``:
+    their corner points), not one of its own, moved onto that corner: where a bolt head's rim touches the
+    bracket's edge, the bracket has a corner on the rim and the head none; the interface both share must have a
+    node there, whichever body meshes it first. The curve's node nearest to the corner moves."""
+    own = np.array([geometry.vertices[c.vertex] for c in features.corners]).reshape(-1, 3)
+    points, moved = packing.points.copy(), np.zeros(len(packing), bool)
+    for x in np.unique(np.concatenate([np.zeros((0, 3)), *others]), axis=0):
+        if len(own) and np.linalg.norm(own - x, axis=1).min() <= tol:
+            continue
+        curve = _curve_through(features, x, tol)
+        nodes = np.flatnonzero((packing.level == CURVE) & (packing.entity == curve) & ~moved)
+        if curve < 0 or not len(nodes):
+            continue
+        nearest = nodes[np.argmin(np.linalg.norm(points[nodes] - x, axis=1))]
+        points[nearest], moved[nearest] = x, True
+    return dataclasses.replace(packing, points=points) if moved.any() else packing
+
+
 def _curve_through(features, x: np.ndarray, tol: float) -> int:
     """The first feature curve whose polyline passes within ``tol`` of the point ``x``, else -1 (a corner of
     one body where the other's curve runs straight on: the square rim of a face one body shares with a
     coplanar face of the other)."""
     for c, curve in enumerate(features.curves):
-        a = curve.points
-        b = np.roll(a, -1, axis=0) if curve.closed else a[1:]
-        a = a if curve.closed else a[:-1]
-        span = b - a
-        t = np.clip(((x - a) * span).sum(axis=1) / np.maximum((span * span).sum(axis=1), 1e-300), 0.0, 1.0)
-        if len(a) and np.linalg.norm(a + t[:, None] * span - x, axis=1).min() <= tol:
+        if _distance(curve, x) <= tol:
             return c
     return -1
+
+
+def _nearest_curve(features, curves: set, x: np.ndarray) -> int:
+    """Of the ``curves`` (indices) a node's CAD edges map to, the one nearest to it: one body's curve may run
+    along several CAD edges that are curves of their own in the other (a nut's rim, one closed curve of the
+    plate it is pressed against, four sides of the nut)."""
+    return min(sorted(curves), key=lambda c: _distance(features.curves[c], x))
+
+
+def _distance(curve, x: np.ndarray) -> float:
+    """The distance of the point ``x`` from the curve's polyline."""
+    a = curve.points
+    b = np.roll(a, -1, axis=0) if curve.closed else a[1:]
+    a = a if curve.closed else a[:-1]
+    if not len(a):
+        return float(np.linalg.norm(curve.points - x, axis=1).min())
+    span = b - a
+    t = np.clip(((x - a) * span).sum(axis=1) / np.maximum((span * span).sum(axis=1), 1e-300), 0.0, 1.0)
+    return float(np.linalg.norm(a + t[:, None] * span - x, axis=1).min())
 
 
 def _radius(packing, x) -> np.ndarray:

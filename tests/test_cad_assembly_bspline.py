@@ -34,9 +34,16 @@ def _rod(x0: float, length: float, start: float = 0.0) -> int:
     return [t for d, t in occ.extrude([(2, disc)], length, 0, 0) if d == 3][0]
 
 
-@pytest.fixture(scope="module")
-def nut_rod_plate(tmp_path_factory):
-    """(STEP path, CAD volumes of the rod, nut and plate)."""
+def _plate() -> list:
+    """A 10 thick plate against the nut, its hole's halves split at right angles to the rod's."""
+    return occ.cut([(3, occ.addBox(1, -15, -15, 10, 30, 30))], [(3, _rod(0, 12, math.pi / 2))])[0]
+
+
+@pytest.fixture(scope="module", params=["rod first", "plate first"])
+def nut_rod_plate(tmp_path_factory, request):
+    """(STEP path, CAD volumes of its solids in file order): the rod, nut and plate, or the plate, rod and nut
+    (the bodies mesh in file order: the plate then meshes the nut's face first, its rim one closed curve of
+    four CAD edges, four curves of the nut with the nut's corners on it)."""
     path = tmp_path_factory.mktemp("cad-assembly-bspline") / "nut_rod_plate.step"
     if not gmsh.isInitialized():
         gmsh.initialize(["-noenv"], readConfigFiles=False)
@@ -44,10 +51,14 @@ def nut_rod_plate(tmp_path_factory):
     previous = gmsh.model.getCurrent()
     try:
         gmsh.model.add("test-cad-assembly-bspline")
+        plate_first = request.param == "plate first"
+        plate = _plate() if plate_first else None
         rod = _rod(-20, 60)
         nut = occ.cut([(3, occ.addBox(0, -10, -10, 1, 20, 20))], [(3, _rod(-1, 3))])[0]
-        plate = occ.cut([(3, occ.addBox(1, -15, -15, 10, 30, 30))], [(3, _rod(0, 12, math.pi / 2))])[0]
-        occ.fragment([(3, rod)], nut + plate)
+        if plate_first:
+            occ.fragment(plate, [(3, rod)] + nut)
+        else:
+            occ.fragment([(3, rod)], nut + _plate())
         occ.synchronize()
         occ.convertToNURBS(occ.getEntities(3))
         occ.synchronize()
