@@ -8,6 +8,8 @@ other into halves), and it was cut into three charts, each keyed by the same CAD
 nut's triangles of one chart for all three ("the interface [2, 7] lost its prescribed triangles", exit 4).
 The nut's face against the plate lies inside the plate's coplanar face: the nut's corners there are points of
 a curve of the plate, not corners of it ("an interface node ... is on no curve or corner of the next body").
+Built plate first, the plate meshes the nut's face first: its rim, one closed curve of four CAD edges, is four
+curves of the nut, and each rim node must go onto the side it lies on, with a node on each of the nut's corners.
 """
 
 from __future__ import annotations
