@@ -383,7 +383,7 @@ def run(
         mesh, moved, exact = on_exact_surfaces(mesh, geometry, features)
     log.info(
         "exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder, sphere or cone; %d nodes moved "
-        "onto them, at most %.3g%s (%.2f s)",
+        "onto them, at most %.3g%s%s (%.2f s)",
         moved["exact_patches"],
         moved["patches"],
         moved["exact_curves"],
@@ -392,6 +392,10 @@ def run(
         moved["largest_move"],
         f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
         if moved["nodes_kept_for_validity"]
+        else "",
+        f"; {moved['patches_left_on_facets']} curved patches left on the input's facets (a coarse STL: they stray "
+        f"from their fitted surface up to {moved['facet_deviation_left']:.2f} x what the mesh may)"
+        if moved.get("patches_left_on_facets")
         else "",
         timings["exact"],
     )
