@@ -23,6 +23,7 @@ from .errors import GeometryError
 from .geometry import Geometry
 
 CIRCLE_TOLERANCE = 2e-3  # max radial deviation / radius for a curve to count as a circle
+TILTED_NORMALS = 0.1  # a cylinder's facet normals: third singular value / first (Gmsh's STLs: 1.3e-2 to 4.7e-2)
 
 
 @dataclass(frozen=True)
@@ -704,8 +705,10 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
         return None
     _, singular, vt = np.linalg.svd(face_normals, full_matrices=False)
     axis = vt[2]
-    if singular[2] > 1e-3 * singular[0]:
+    if singular[2] > TILTED_NORMALS * singular[0]:
         return None
+    if singular[2] > 1e-3 * singular[0]:  # facets across the axis lines tilt their normals: fit the vertices
+        axis = _cylinder_axis(vertices, axis)
     circle = fit_circle_projected(vertices, axis)
     if circle is None:
         return None
@@ -720,14 +723,44 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
     return Cylinder(centre, axis, radius, concave, bool(gaps.max() < np.radians(30)))
 
 
+def _cylinder_axis(vertices: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The axis (3,) of the cylinder through ``vertices`` (k, 3) nearest ``axis``: least squares over the axis
+    direction, the centre and the radius (the facets' normals only start it: an STL's triangles that cross the
+    cylinder's lines, as Gmsh's or most CAD exports', tilt them by up to a few degrees)."""
+    from scipy.optimize import least_squares
+
+    u = _any_perpendicular(axis)
+    v = np.cross(axis, u)
+    x = vertices - vertices.mean(axis=0)
+
+    def direction(p):
+        a = axis + p[0] * u + p[1] * v
+        return a / np.linalg.norm(a)
+
+    def residuals(p):
+        a = direction(p)
+        e1 = u - (u @ a) * a
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(a, e1)
+        return np.hypot(x @ e1 - p[2], x @ e2 - p[3]) - p[4]
+
+    start = fit_circle_projected(vertices, axis, tolerance=np.inf)
+    if start is None:
+        return axis
+    centre = start[0] - vertices.mean(axis=0)
+    found = least_squares(residuals, [0.0, 0.0, centre @ u, centre @ v, start[1]], x_scale="jac")
+    return direction(found.x)
+
+
 def _any_perpendicular(axis: np.ndarray) -> np.ndarray:
     helper = np.eye(3)[np.argmin(np.abs(axis))]
     v = np.cross(axis, helper)
     return v / np.linalg.norm(v)
 
 
-def fit_circle_projected(points: np.ndarray, axis: np.ndarray):
-    """Centre (a point on the axis) and radius of the circle the points make seen along ``axis``."""
+def fit_circle_projected(points: np.ndarray, axis: np.ndarray, tolerance: float = CIRCLE_TOLERANCE):
+    """Centre (a point on the axis) and radius of the circle the points make seen along ``axis``; None if one
+    strays from it by more than ``tolerance`` x the radius."""
     u = _any_perpendicular(axis)
     v = np.cross(axis, u)
     origin = points.mean(axis=0)
@@ -735,7 +768,7 @@ def fit_circle_projected(points: np.ndarray, axis: np.ndarray):
     A = np.column_stack([2 * xy, np.ones(len(xy))])
     (cx, cy, c), *_ = np.linalg.lstsq(A, (xy**2).sum(axis=1), rcond=None)
     radius = float(np.sqrt(max(c + cx**2 + cy**2, 0.0)))
-    if radius == 0 or np.abs(np.linalg.norm(xy - [cx, cy], axis=1) - radius).max() > CIRCLE_TOLERANCE * radius:
+    if radius == 0 or np.abs(np.linalg.norm(xy - [cx, cy], axis=1) - radius).max() > tolerance * radius:
         return None
     return origin + cx * u + cy * v, radius
 
