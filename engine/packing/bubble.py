@@ -342,7 +342,7 @@ def _neighbours(state: LevelState, k: int) -> np.ndarray:
     other = (neighbours >= 0) & (neighbours < n)
     mine = np.broadcast_to(state.entity[:, None], neighbours.shape)[other]
     theirs = state.entity[neighbours[other]]
-    other[other] = (mine != theirs) & ~np.asarray(state.run.touching[mine, theirs]).ravel().astype(bool)
+    other[other] = ~np.asarray(state.run.touching[mine, theirs]).ravel().astype(bool)  # diagonal: own curve
     neighbours = np.where(other, -1, neighbours)
     nearest_first = np.argsort(neighbours < 0, axis=1, kind="stable")[:, :k]
     return np.take_along_axis(neighbours, nearest_first, axis=1)
