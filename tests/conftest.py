@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 
 import pytest
@@ -53,3 +54,30 @@ def junction_run(tmp_path_factory):
         )
     )
     return folder / "out", run(load_job(job))
+
+
+@contextlib.contextmanager
+def gmsh_model(name: str, options: dict | None = None):
+    """A Gmsh model of its own for the block (yields ``gmsh.model.occ``), with the Gmsh ``options`` set: Gmsh is
+    initialised if it is not, and afterwards the model is removed, the options are set back and the model that
+    was current is current again, so tests that build OpenCASCADE solids do not see each other's state."""
+    import gmsh
+
+    if not gmsh.isInitialized():
+        gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = gmsh.model.getCurrent() if gmsh.model.list() else None
+    saved = {key: gmsh.option.getNumber(key) for key in options or {}}
+    gmsh.model.add(name)
+    try:
+        for key, value in (options or {}).items():
+            gmsh.option.setNumber(key, value)
+        yield gmsh.model.occ
+    finally:
+        for key, value in saved.items():
+            gmsh.option.setNumber(key, value)
+        if name in gmsh.model.list():
+            gmsh.model.setCurrent(name)
+            gmsh.model.remove()
+        if previous in gmsh.model.list():
+            gmsh.model.setCurrent(previous)

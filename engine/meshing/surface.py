@@ -56,8 +56,8 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
 
     A closed curve's chain does not repeat its first node.
     """
-    corner_node = {int(packing.entity[i]): i for i in np.flatnonzero(packing.level == CORNER)}
-    corner_at_vertex = {c.vertex: corner_node[k] for k, c in enumerate(features.corners) if k in corner_node}
+    corner_node = _corner_nodes(packing, features)
+    corner_at_vertex = {c.vertex: corner_node[k] for k, c in enumerate(features.corners) if corner_node[k] >= 0}
     curve_nodes = np.flatnonzero(packing.level == CURVE)
     by_curve = {key: curve_nodes[packing.entity[curve_nodes] == key] for key in np.unique(packing.entity[curve_nodes])}
     chains = {}
@@ -68,10 +68,22 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
         ordered = nodes[np.argsort(curve.parameter(packing.points[nodes]), kind="stable")]
         start = corner_at_vertex.get(int(curve.vertices[0]))
         end = None if curve.closed else corner_at_vertex.get(int(curve.vertices[-1]))
-        chains[index] = np.concatenate(
-            [[start] if start is not None else [], ordered, [end] if end is not None else []]
-        ).astype(np.int64)
+        chain = np.concatenate([[start] if start is not None else [], ordered, [end] if end is not None else []])
+        chains[index] = chain[np.r_[True, np.diff(chain) != 0]].astype(np.int64)  # a short curve's ends: one node
     return chains
+
+
+def _corner_nodes(packing, features) -> np.ndarray:
+    """(corners,) the node of each corner: its own, or for a corner that has none (its short curve joined it to
+    another, engine/packing/start.py ``short_curve_groups``) the nearest corner node; -1 if there are none."""
+    nodes = np.flatnonzero(packing.level == CORNER)
+    node = np.full(len(features.corners), -1, np.int64)
+    node[packing.entity[nodes]] = nodes
+    missing = np.flatnonzero(node < 0)
+    if len(missing) and len(nodes):
+        points = np.array([features.corners[k].point for k in missing]).reshape(-1, 3)
+        node[missing] = nodes[cKDTree(packing.points[nodes]).query(points)[1]]
+    return node
 
 
 def chain_edges(chain: np.ndarray, closed: bool) -> np.ndarray:

@@ -6,6 +6,8 @@ where s matches h, else splits) thinned against the boundary nodes and itself.""
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
+from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from ..sampling import thin
@@ -16,13 +18,53 @@ SURFACE_EXCLUSION = 0.8  # fraction of h kept free between surface nodes
 VOLUME_EXCLUSION = 0.7  # fraction of h kept free between volume and other nodes
 JITTER = 0.1  # lattice jitter, fraction of the cell size
 CANDIDATES_PER_H2 = 8.0  # surface candidates per h^2 of area before thinning
+SHORT_CURVE = 0.1  # a curve shorter than this x h is no mesh edge: its end corners share one node
 
 
 def corner_nodes(features, sizing) -> Packing:
+    """One node per corner, at the corner, except that corners joined by surface curves shorter than SHORT_CURVE x h
+    (h the smaller of their ends') share the node of the first of them (see :func:`short_curve_groups`)."""
     points = np.array([c.point for c in features.corners]).reshape(-1, 3)
-    return Packing(
-        points=points, level=np.full(len(points), CORNER), entity=np.arange(len(points)), radius=sizing(points) / 2
-    )
+    keep = np.flatnonzero(short_curve_groups(features, sizing) == np.arange(len(points)))
+    return Packing(points=points[keep], level=np.full(len(keep), CORNER), entity=keep, radius=sizing(points[keep]) / 2)
+
+
+def short_curve_groups(features, sizing) -> np.ndarray:
+    """(corners,) per corner the first corner of its group: corners joined by open surface curves shorter than
+    SHORT_CURVE x h (the smaller h of the curve's ends), in groups no wider than that, are one mesh node.
+
+    A CAD model's sliver edge (0.004 mm where a gear tooth's flank, tip and 0.25 mm chamfer meet, at h 0.4) would
+    otherwise be a mesh edge h / 100 long, and every tetrahedron on it flat; Gmsh's Mesh.ToleranceEdgeLength
+    skips such edges the same way. The node stays on a corner, so the surface moves by less than the curve's
+    length there."""
+    count = len(features.corners)
+    if count == 0:
+        return np.zeros(0, np.int64)
+    points = np.array([c.point for c in features.corners]).reshape(-1, 3)
+    h = sizing(points)
+    corner_of_vertex = {c.vertex: k for k, c in enumerate(features.corners)}
+    pairs = []
+    for curve in features.curves:
+        if curve.closed or not curve.on_surface or curve.vertices is None:
+            continue
+        a = corner_of_vertex.get(int(curve.vertices[0]))
+        b = corner_of_vertex.get(int(curve.vertices[-1]))
+        if a is not None and b is not None and a != b and curve.length < SHORT_CURVE * min(h[a], h[b]):
+            pairs.append((a, b))
+    first = np.arange(count)
+    if not pairs:
+        return first
+    pairs = np.array(pairs)
+    graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    _, group = csgraph.connected_components(graph, directed=False)
+    order = np.argsort(group, kind="stable")  # corners by group, lowest index first
+    starts = np.flatnonzero(np.r_[True, np.diff(group[order]) != 0])
+    lead = np.repeat(order[starts], np.diff(np.r_[starts, count]))  # the first corner of each corner's group
+    first[order] = lead
+    width = np.linalg.norm(points - points[first], axis=1)
+    narrow = np.ones(count, bool)  # a chain of short curves adding up to more than SHORT_CURVE x h stays apart
+    np.logical_and.at(narrow, first, width < SHORT_CURVE * h)
+    return np.where(narrow[first], first, np.arange(count))
 
 
 def curve_nodes(features, sizing, existing) -> Packing:
