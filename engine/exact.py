@@ -6,8 +6,10 @@ surface and its facets' insides off it, by up to the faceting's sagitta. A patch
 analytic surface to within EXACT_TOLERANCE x the model size is that surface; its mesh nodes, and the
 10-node mid-edge nodes of its faces, belong on it, not on the facets (a hole drawn as a polygon has stress
 peaks at the polygon's corners that refinement never removes). Curve nodes go onto the intersection of
-the exact surfaces of the patches the curve borders (alternating projections); corners stay where the
-input has them. Patches that fit no analytic surface (freeform, or blends of several) keep the facets.
+the exact surfaces of the patches the curve borders (alternating projections), but those of a smooth cut
+(faces meeting tangentially: the mesher slides them over the surface) onto the surface of the patch they lie
+on; corners stay where the input has them. Patches that fit no analytic surface (freeform, or blends of
+several) keep the facets.
 
 An STL's vertices lie on the surface but its facets do not: moving the nodes onto the exact surface moves the
 mesh off the input by up to the facets' sagitta. Where the mesh is finer than the faceting (a 15 degree export,
@@ -403,12 +405,13 @@ def on_exact_surfaces(mesh, geometry, features):
     exact = ExactSurfaces(surfaces, curve_surfaces(geometry, features, surfaces))
     surfaces, along = exact
     points = mesh.points.copy()
-    for level, table in (("patch", [[s] if s is not None else [] for s in surfaces]), ("curve", along)):
-        nodes = np.flatnonzero((mesh.node_level == Level[level.upper()]) & (mesh.node_entity >= 0))
-        for entity in np.unique(mesh.node_entity[nodes]):
-            if table[entity]:
-                mine = nodes[mesh.node_entity[nodes] == entity]
-                points[mine] = onto_intersection(table[entity], points[mine])
+    level, entity = _surface_or_curve(mesh, geometry, features)
+    for which, table in ((Level.PATCH, [[s] if s is not None else [] for s in surfaces]), (Level.CURVE, along)):
+        nodes = np.flatnonzero((level == which) & (entity >= 0))
+        for key in np.unique(entity[nodes]):
+            if table[key]:
+                mine = nodes[entity[nodes] == key]
+                points[mine] = onto_intersection(table[key], points[mine])
     kept = np.zeros(len(points), bool)
     while (bad := signed_volumes(points, mesh.tets) <= 0).any():  # ends: the input mesh has none
         back = np.unique(mesh.tets[bad])
@@ -425,6 +428,20 @@ def on_exact_surfaces(mesh, geometry, features):
         **faithful_stats,
     }
     return dataclasses.replace(mesh, points=points), stats, exact
+
+
+def _surface_or_curve(mesh, geometry, features) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) level and entity of each node as the move onto exact surfaces takes them: a node of a smooth cut
+    (a curve between faces that meet tangentially) slides over the surface in the mesher's improvement
+    (engine/meshing/delaunay.py), up to about h off its curve, so it goes onto the surface of the patch it lies
+    on, not back onto its curve (a move of h that flattens its tets)."""
+    level, entity = mesh.node_level.copy(), mesh.node_entity.copy()
+    smooth = np.array([not c.sharp for c in features.curves] + [False], dtype=bool)
+    on_cut = np.flatnonzero((level == Level.CURVE) & smooth[np.where(level == Level.CURVE, entity, -1)])
+    if len(on_cut):
+        level[on_cut] = Level.PATCH
+        entity[on_cut] = features.face_patch[geometry.closest_point(mesh.points[on_cut])[2]]
+    return level, entity
 
 
 def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube_radii=()):

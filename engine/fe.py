@@ -209,8 +209,8 @@ def quadratic(
 
     Mid-edge nodes of boundary edges are moved onto the exact surface of their patch where it has one
     (:mod:`engine.exact`: a plane, cylinder, sphere or cone), else onto the input surface; a curve's chords onto
-    the exact intersection of the patches it borders, else onto the curve (a sharp one) or the input surface
-    (a smooth cut). Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
+    the exact intersection of the patches it borders, else onto the curve; a smooth cut's chords as a patch's.
+    Where an element's scaled Jacobian would fall below ``floor`` its mid-edge nodes move
     only part of the way (:func:`limit_curving`).
     """
     owner, side, patch = boundary if boundary is not None else tet_boundary(mesh)
@@ -228,13 +228,13 @@ def quadratic(
     chords, curve = curve_edges(mesh, features, triangles6[:, :3])
     chord_row = row_index(unique, np.sort(chords, axis=1))
     for c in np.unique(curve):
+        if not features.curves[c].sharp:  # a smooth cut's chords stay curved onto a patch's surface, as its nodes
+            continue  # (engine/exact.py: they slide over the surface, off the curve)
         rows = chord_row[(curve == c) & (chord_row >= 0)]
         if along[c]:
             curved[rows] = onto_intersection(along[c], straight[rows])
-        elif features.curves[c].sharp:
+        else:
             curved[rows] = features.curves[c].point_at(features.curves[c].parameter(straight[rows]))
-        else:  # a smooth cut's chords are curved onto the surface, like a patch's
-            curved[rows] = geometry.closest_point(straight[rows])[0]
     points = limit_curving(np.vstack([mesh.points, straight]), np.vstack([mesh.points, curved]), tets10, floor)
     return points, tets10, triangles6
 
