@@ -55,6 +55,7 @@ SKIN = 0.3  # a bubble that moved this x h since the last build is stale
 STALE_SHARE = 0.05  # rebuild the neighbour lists once this share of bubbles is stale
 REBUILD_EVERY = 50  # ... or after this many steps
 INSIDE_CHECK_EVERY = 5  # volume bubbles outside the solid go back to their last checked place
+LEAVING_TOGETHER = 30.0  # degrees: curves leaving a corner closer than this do not push each other's bubbles
 END_GAP = 0.1  # a curve bubble nearer than this x its diameter to an end of its curve (a corner node) is dropped
 
 
@@ -332,8 +333,8 @@ def _neighbours(state: LevelState, k: int) -> np.ndarray:
     its corners, as in the paper. Two curves nearer than h that do not meet (a 1 mm chamfer's two edges at h 4.2,
     the close circles of a V-belt groove) pushed each other's bubbles along and the rules deleted them where they
     overlapped, leaving gaps of 4-10 h along both edges, and bubbles pushed onto their own curve's next one;
-    flat tetrahedra there. Curves that meet at a corner still see each other (near the corner their bubbles
-    would crowd)."""
+    flat tetrahedra there. Curves that meet at a corner at an angle still see each other (near the corner their
+    bubbles would crowd); curves that leave it together do not (:func:`_touching_curves`)."""
     n = len(state.x)
     everything = np.concatenate([state.x, state.frozen])
     if state.level != CURVE:
@@ -349,18 +350,41 @@ def _neighbours(state: LevelState, k: int) -> np.ndarray:
 
 
 def _touching_curves(features) -> sparse.csr_matrix:
-    """(c, c) whether two feature curves share a corner (an end of an open curve, or the corner a loop starts
-    at), the diagonal included."""
+    """(c, c) whether two feature curves meet at a corner (an end of an open curve, or the corner a loop starts
+    at) at an angle of at least LEAVING_TOGETHER between their first segments, the diagonal included.
+
+    Curves that leave a corner together (a round dying tangentially into a wall: the wall's edge and the round's
+    arc) run closer than h near it however their bubbles sit: bubbles that saw each other pushed one of them
+    onto the corner (3.5 deg tets); each packed on its own, their first nodes sit h from the corner."""
     corners = np.array([c.point for c in features.corners]).reshape(-1, 3)
     ends = np.array([[curve.points[0], curve.points[-1]] for curve in features.curves]).reshape(-1, 2, 3)
     if len(corners) == 0 or len(ends) == 0:
         return sparse.identity(len(features.curves), dtype=bool, format="csr")
     scale = float(np.ptp(np.concatenate([corners, ends.reshape(-1, 3)]), axis=0).max()) or 1.0
     gap, corner = cKDTree(corners).query(ends.reshape(-1, 3))
-    curve = np.repeat(np.arange(len(ends)), 2)
-    on = gap <= 1e-9 * scale
-    incidence = sparse.csr_matrix((np.ones(int(on.sum())), (curve[on], corner[on])), shape=(len(ends), len(corners)))
-    return ((incidence @ incidence.T) + sparse.identity(len(ends), format="csr")).astype(bool).tocsr()
+    on = np.flatnonzero(gap <= 1e-9 * scale)
+    curve, end = on // 2, on % 2  # each incidence: a curve, which of its ends, the corner there
+    leaving = np.array([_first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
+    order = np.argsort(corner[on], kind="stable")
+    curve, leaving, at = curve[order], leaving[order], corner[on][order]
+    rows, cols = [np.arange(len(features.curves))], [np.arange(len(features.curves))]
+    for offset in range(1, len(at)):  # pairs of incidences at one corner, offset apart in corner order
+        same = np.flatnonzero(at[offset:] == at[:-offset])
+        if len(same) == 0:
+            break
+        apart = np.einsum("ij,ij->i", leaving[same], leaving[same + offset]) < np.cos(np.radians(LEAVING_TOGETHER))
+        rows += [curve[same[apart]], curve[same[apart] + offset]]
+        cols += [curve[same[apart] + offset], curve[same[apart]]]
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    count = len(features.curves)
+    return sparse.csr_matrix((np.ones(len(rows), bool), (rows, cols)), shape=(count, count)).astype(bool)
+
+
+def _first_segment(curve, end: int) -> np.ndarray:
+    """The unit direction in which ``curve`` leaves its start (``end`` 0) or its end (1)."""
+    points = curve.points
+    step = points[1] - points[0] if end == 0 else points[-2] - points[-1]
+    return step / (np.linalg.norm(step) or 1.0)
 
 
 def _control(state: LevelState, step: int, neighbours: np.ndarray):

@@ -349,6 +349,14 @@ def thin_chamfer_plate() -> int:
     return _chamfer(occ.addBox(0, 0, 0, 140, 90, 12), _curves(_at_z(12)), 1)
 
 
+def round_into_wall() -> int:
+    """A block 60 x 40 x 20 with a channel 30 wide and 6 deep across it, the convex edge of the channel floor and
+    the front face rounded r 2: the round dies into the channel walls, whose faces get two cusps (the wall's
+    edge and the round's arc leave one corner together)."""
+    block = _cut(occ.addBox(0, 0, 0, 60, 40, 20), occ.addBox(15, -1, 14, 30, 42, 7))
+    return _fillet(block, _curves(lambda b: _at_z(14)(b) and abs(b[1]) < EPS and abs(b[4]) < EPS), 2)
+
+
 PARTS = {
     f.__name__: f
     for f in (
@@ -379,6 +387,7 @@ PARTS = {
         boss_arm,
         cross_bored_block,
         thin_chamfer_plate,
+        round_into_wall,
     )
 }
 
