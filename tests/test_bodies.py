@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import gmsh_model
 
 from engine.errors import GeometryError
 from engine.geometry import validate_surface
@@ -99,16 +100,12 @@ def test_two_boxes_mesh_as_two_bodies(tmp_path):
     body = vtu.cell_data["body"][0]
     centroids = vtu.points[tets].mean(axis=1)
     assert set(body.tolist()) == {1, 2} and ((centroids[:, 0] > 10) == (body == 2)).all()
-    gmsh.initialize(readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.open(str(out / "mesh.msh"))
+    with gmsh_model("test-bodies-msh"):
+        gmsh.merge(str(out / "mesh.msh"))
         groups = {gmsh.model.getPhysicalName(dim, tag): (dim, tag) for dim, tag in gmsh.model.getPhysicalGroups()}
         assert {"solid", "solid-1", "solid-2"} <= set(groups) and groups["solid-2"][0] == 3
         nodes = gmsh.model.mesh.getNodesForPhysicalGroup(*groups["solid-2"])[1].reshape(-1, 3)
         assert (nodes[:, 0] > 14.99).all() and len(nodes) > 8
-    finally:
-        gmsh.finalize()
     inp = meshio.read(out / "mesh.inp")
     for name, number in (("solid_1", 1), ("solid_2", 2)):
         cells = np.concatenate([np.asarray(c, dtype=int) for c in inp.cell_sets[name]])

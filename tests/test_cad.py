@@ -20,6 +20,7 @@ import gmsh
 import meshio
 import numpy as np
 import pytest
+from conftest import gmsh_model
 
 from engine.acceptance import interface_sides
 from engine.cad import load_cad
@@ -101,15 +102,9 @@ PARTS = {
 def step_files(tmp_path_factory):
     """{part: (STEP path, CAD volume)}, written by Gmsh's OpenCASCADE."""
     folder = tmp_path_factory.mktemp("cad")
-    started = not gmsh.isInitialized()
-    if started:
-        gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    previous = gmsh.model.getCurrent()
     out = {}
-    try:
-        for name, build in PARTS.items():
-            gmsh.model.add(f"test-cad-{name}")
+    for name, build in PARTS.items():
+        with gmsh_model(f"test-cad-{name}"):
             build()
             occ.synchronize()
             path = folder / f"{name}.step"
@@ -119,10 +114,6 @@ def step_files(tmp_path_factory):
                 for suffix in ("brep", "igs"):
                     gmsh.write(str(path.with_suffix(f".{suffix}")))
                     out[f"{name}.{suffix}"] = (path.with_suffix(f".{suffix}"), out[name][1])
-            gmsh.model.remove()
-    finally:
-        if previous in gmsh.model.list():
-            gmsh.model.setCurrent(previous)
     return out
 
 

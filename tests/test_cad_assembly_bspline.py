@@ -22,6 +22,7 @@ import gmsh
 import meshio
 import numpy as np
 import pytest
+from conftest import gmsh_model
 
 from engine.cad import load_cad
 from engine.meshing.improve import min_dihedrals
@@ -48,12 +49,7 @@ def nut_rod_plate(tmp_path_factory, request):
     (the bodies mesh in file order: the plate then meshes the nut's face first, its rim one closed curve of
     four CAD edges, four curves of the nut with the nut's corners on it)."""
     path = tmp_path_factory.mktemp("cad-assembly-bspline") / "nut_rod_plate.step"
-    if not gmsh.isInitialized():
-        gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    previous = gmsh.model.getCurrent()
-    try:
-        gmsh.model.add("test-cad-assembly-bspline")
+    with gmsh_model("test-cad-assembly-bspline"):
         plate_first = request.param == "plate first"
         plate = _plate() if plate_first else None
         rod = _rod(-20, 60)
@@ -68,10 +64,6 @@ def nut_rod_plate(tmp_path_factory, request):
         assert {gmsh.model.getType(2, face) for _, face in occ.getEntities(2)} == {"BSpline surface"}
         volumes = [occ.getMass(3, tag) for _, tag in occ.getEntities(3)]
         gmsh.write(str(path))
-        gmsh.model.remove()
-    finally:
-        if previous in gmsh.model.list():
-            gmsh.model.setCurrent(previous)
     return path, volumes
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import gmsh
 import numpy as np
 import pytest
+from conftest import gmsh_model
 
 from engine.cad import CadEntity
 from engine.cli import main
@@ -111,14 +112,9 @@ def step_files(tmp_path_factory):
     """{part: (STEP path, CAD volume)}: each part with its faces converted to B-splines (``{part}``) and as
     built (``{part}-analytic``), and the spline hole as built."""
     folder = tmp_path_factory.mktemp("cad-bspline")
-    if not gmsh.isInitialized():
-        gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    previous = gmsh.model.getCurrent()
     out = {}
-    try:
-        for name, build in [*PARTS.items(), ("spline_hole", spline_hole), ("freeform_cap", freeform_cap), ("tee", tee)]:
-            gmsh.model.add(f"test-cad-bspline-{name}")
+    for name, build in [*PARTS.items(), ("spline_hole", spline_hole), ("freeform_cap", freeform_cap), ("tee", tee)]:
+        with gmsh_model(f"test-cad-bspline-{name}"):
             tag = build()
             occ.synchronize()
             volume = occ.getMass(3, tag)
@@ -130,10 +126,6 @@ def step_files(tmp_path_factory):
             assert {gmsh.model.getType(2, face) for _, face in occ.getEntities(2)} >= {"BSpline surface"}
             gmsh.write(str(folder / f"{name}.step"))
             out[name] = (folder / f"{name}.step", volume)
-            gmsh.model.remove()
-    finally:
-        if previous in gmsh.model.list():
-            gmsh.model.setCurrent(previous)
     return out
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import trimesh
 import yaml
+from conftest import gmsh_model
 
 from engine.cli import main
 from engine.curvature import Curvature, measure
@@ -46,22 +47,11 @@ def torus_stl(tmp_path_factory):
 
 def gmsh_stl(path, add, size):
     """An unstructured Gmsh surface mesh (Delaunay, element size ``size``) of the OpenCASCADE solid ``add()``."""
-    started = not gmsh.isInitialized()
-    if started:
-        gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.clear()
+    with gmsh_model("test-curvature-stl", {"Mesh.MeshSizeMin": size, "Mesh.MeshSizeMax": size}) as occ:
         add()
-        gmsh.model.occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMin", size)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        occ.synchronize()
         gmsh.model.mesh.generate(2)
         gmsh.write(str(path))
-    finally:
-        gmsh.clear()
-        if started:
-            gmsh.finalize()
     return trimesh.load(path)
 
 

@@ -9,6 +9,7 @@ import gmsh
 import pytest
 import trimesh
 import yaml
+from conftest import gmsh_model
 
 from engine.curvature import curvature
 from engine.errors import LimitError
@@ -27,27 +28,19 @@ def holed_block(tmp_path_factory):
     """A block 200 x 120 x 20 with 18 through holes of radius 3.5, tessellated by OpenCASCADE as a CAD
     system exports STL (5 deg angular, 0.05 mm linear deflection: long thin facets on the hole walls)."""
     path = tmp_path_factory.mktemp("holed") / "block.stl"
-    started = not gmsh.isInitialized()
-    if started:
-        gmsh.initialize(readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.clear()
-        occ = gmsh.model.occ
+    options = {
+        "Mesh.Binary": 1,
+        "Mesh.StlOneSolidPerSurface": 0,
+        "Mesh.StlLinearDeflectionRelative": 0,
+        "Mesh.StlLinearDeflection": 0.05,
+        "Mesh.StlAngularDeflection": math.radians(5.0),
+    }
+    with gmsh_model("test-fail-fast-holed-block", options) as occ:
         block = occ.addBox(0, 0, 0, 200, 120, 20)
         holes = [(3, occ.addCylinder(20 + 32 * (i % 6), 25 + 35 * (i // 6), -1, 0, 0, 22, 3.5)) for i in range(HOLES)]
         occ.cut([(3, block)], holes)
         occ.synchronize()
-        gmsh.option.setNumber("Mesh.Binary", 1)
-        gmsh.option.setNumber("Mesh.StlOneSolidPerSurface", 0)
-        gmsh.option.setNumber("Mesh.StlLinearDeflectionRelative", 0)
-        gmsh.option.setNumber("Mesh.StlLinearDeflection", 0.05)
-        gmsh.option.setNumber("Mesh.StlAngularDeflection", math.radians(5.0))
         gmsh.write(str(path))
-    finally:
-        gmsh.clear()
-        if started:
-            gmsh.finalize()
     surface = trimesh.load(path, force="mesh")
     trimesh.repair.fix_normals(surface)  # Gmsh writes a reversed face's triangles as they are
     surface.export(path)

@@ -10,6 +10,7 @@ import meshio
 import numpy as np
 import pytest
 import yaml
+from conftest import gmsh_model
 from test_meshers import meshed, packed
 
 from engine.cli import main
@@ -46,17 +47,13 @@ def root(tmp_path_factory):
 
 def test_msh_opens_in_gmsh_with_the_features_as_physical_groups(root):
     out = written(root, 1)
-    gmsh.initialize(readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
-        gmsh.open(str(out / "mesh.msh"))
+    with gmsh_model("test-fe-output-msh"):
+        gmsh.merge(str(out / "mesh.msh"))
         groups = {gmsh.model.getPhysicalName(dim, tag): (dim, tag) for dim, tag in gmsh.model.getPhysicalGroups()}
         assert {"solid", "junction", "cylinder", "top", "bottom", "plate-edge"} <= set(groups)
         assert groups["solid"][0] == 3 and groups["junction"][0] == 1 and groups["cylinder"][0] == 2
         _, nodes = gmsh.model.mesh.getNodesForPhysicalGroup(*groups["junction"])[:2]
         assert len(nodes) > 10
-    finally:
-        gmsh.finalize()
     vtu = meshio.read(out / "mesh.vtu")
     msh = meshio.read(out / "mesh.msh")
     assert len(msh.cells_dict["tetra"]) == len(vtu.cells_dict["tetra"])

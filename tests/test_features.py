@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from conftest import gmsh_model
 
 from engine.features import detect_features
 
@@ -93,26 +94,12 @@ def test_a_hole_whose_facets_cross_the_cylinder_lines_is_a_hole(tmp_path):
     from engine.geometry import load_surface
 
     path = tmp_path / "plate.stl"
-    if not gmsh.isInitialized():
-        gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    previous = gmsh.model.getCurrent()
-    try:
-        gmsh.model.add("test-tilted-hole")
-        occ = gmsh.model.occ
+    options = {"Mesh.MeshSizeFromCurvature": 24, "Mesh.MeshSizeMax": 5.0, "Mesh.Algorithm": 6}
+    with gmsh_model("test-tilted-hole", options) as occ:
         occ.cut([(3, occ.addBox(0, 0, 0, 60, 40, 20))], [(3, occ.addCylinder(30, 20, -1, 0, 0, 22, 8))])
         occ.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 24)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 5.0)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
         gmsh.model.mesh.generate(2)
         gmsh.write(str(path))
-        gmsh.model.remove()
-    finally:
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", 1e22)
-        if previous in gmsh.model.list():
-            gmsh.model.setCurrent(previous)
     mesh = trimesh.load(path, force="mesh")
     wall = np.abs(np.hypot(mesh.triangles_center[:, 0] - 30, mesh.triangles_center[:, 1] - 20) - 8) < 0.5
     singular = np.linalg.svd(mesh.face_normals[wall], compute_uv=False)
