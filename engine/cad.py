@@ -18,6 +18,7 @@ moves the mesh nodes and 10-node mid-edge nodes.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import re
 import tempfile
@@ -54,8 +55,9 @@ BLEND_SPREAD = 0.02  # a non-analytic face whose larger principal curvature vari
 
 @dataclass(frozen=True)
 class CadModel:
-    """The OpenCASCADE model of ``path`` as Gmsh holds it, under ``name``; rebuilt the same way (same tags)
-    whenever another user of Gmsh has removed it."""
+    """The OpenCASCADE model of ``path`` as Gmsh holds it, under ``name`` (:func:`load_cad`: the path and a digest
+    of the file's bytes, so that a file written again at the same path is a model of its own); rebuilt the same
+    way (same tags) whenever another user of Gmsh has removed it."""
 
     path: str
     name: str
@@ -147,7 +149,8 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
         )
     if not path.is_file():
         raise GeometryError("file not found", where=source, fix="check the path")
-    model = CadModel(str(path.resolve()), f"fuzzymesh-cad:{path.resolve()}")
+    resolved = path.resolve()
+    model = CadModel(str(resolved), f"fuzzymesh-cad:{resolved}:{hashlib.sha1(resolved.read_bytes()).hexdigest()}")
     with model.current() as gm:
         solids = np.array([tag for _, tag in gm.getEntities(3)])
         if not len(solids):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import shutil
 from pathlib import Path
 
 import gmsh
@@ -309,6 +310,16 @@ def test_step_lengths_are_read_in_millimetres(step_files, tmp_path):
     _, geometry, features = solid_features(metres)
     assert geometry.bounds[1] == pytest.approx([100e3, 60e3, 20e3])
     assert sorted(p.cylinder.radius for p in features.patches if "hole" in p.kinds) == pytest.approx([4e3, 6e3])
+
+
+def test_a_file_written_again_at_its_path_is_read_again(step_files, tmp_path):
+    """The Gmsh model of a file was kept under its path alone: a file written again at the same path in one
+    process (a batch worker, a test's fixture) loaded as the earlier file's model, its faces, tags and volume."""
+    path = tmp_path / "part.step"
+    shutil.copy(step_files["box_with_holes"][0], path)
+    assert load_cad(path)[0].volume == pytest.approx(step_files["box_with_holes"][1], rel=2e-3)
+    shutil.copy(step_files["bracket"][0], path)
+    assert load_cad(path)[0].volume == pytest.approx(step_files["bracket"][1], rel=2e-3)
 
 
 def test_a_file_of_faces_is_healed_into_a_solid(step_files):
