@@ -150,6 +150,53 @@ class Features:
         return sorted({n for group in (self.corners, self.curves, self.patches) for f in group for n in f.names})
 
 
+def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
+    """(patch on the left, patch on the right) of every surface curve, seen from outside along it."""
+    faces = geometry.mesh.faces
+    nv = len(geometry.mesh.vertices)
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    keys = directed[:, 0] * nv + directed[:, 1]
+    order = np.argsort(keys)
+    keys, owner = keys[order], (order // 3)
+    sides = {}
+    for index, curve in enumerate(features.curves):
+        if not curve.on_surface or curve.vertices is None:
+            continue
+        v = np.asarray(curve.vertices)
+        a, b = (v, np.roll(v, -1)) if curve.closed else (v[:-1], v[1:])
+        found = []
+        for edge in (a * nv + b, b * nv + a):
+            at = np.clip(np.searchsorted(keys, edge), 0, len(keys) - 1)
+            hit = keys[at] == edge
+            patches = features.face_patch[owner[at[hit]]]
+            found.append(int(np.bincount(patches).argmax()) if len(patches) else -1)
+        sides[index] = tuple(found)
+    return sides
+
+
+def curves_meeting(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair of curve ends at one corner, each pair once: (curve, end, other curve, its end), (k,) each;
+    end 0 a curve's start, 1 the end of an open curve (a loop meets at the corner it starts at)."""
+    corners = np.array([c.point for c in features.corners]).reshape(-1, 3)
+    ends = np.array([[curve.points[0], curve.points[-1]] for curve in features.curves]).reshape(-1, 3)
+    none = np.zeros(0, np.int64)
+    if len(corners) == 0 or len(ends) == 0:
+        return none, none, none, none
+    scale = float(np.ptp(np.concatenate([corners, ends]), axis=0).max()) or 1.0
+    gap, corner = cKDTree(corners).query(ends)
+    on = np.flatnonzero(gap <= 1e-9 * scale)
+    on = on[np.argsort(corner[on], kind="stable")]  # curve ends by corner
+    first, second = [none], [none]
+    for offset in range(1, len(on)):  # the ends ``offset`` apart at one corner
+        same = np.flatnonzero(corner[on[offset:]] == corner[on[:-offset]])
+        if len(same) == 0:
+            break
+        first.append(on[same])
+        second.append(on[same + offset])
+    first, second = np.concatenate(first), np.concatenate(second)
+    return first // 2, first % 2, second // 2, second % 2
+
+
 def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=()) -> Features:
     """Find corners, feature curves and patches of ``geometry`` (angles in degrees).
 

@@ -23,7 +23,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
-from ..features import conformal_map, coordinates, describe
+from ..features import conformal_map, coordinates, curve_sides, describe
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
@@ -89,30 +89,6 @@ def _corner_nodes(packing, features) -> np.ndarray:
 def chain_edges(chain: np.ndarray, closed: bool) -> np.ndarray:
     """(k, 2) consecutive node pairs of a curve's chain, the closing pair too when the curve is closed."""
     return np.column_stack([chain, np.roll(chain, -1)]) if closed else np.column_stack([chain[:-1], chain[1:]])
-
-
-def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:
-    """(patch on the left, patch on the right) of every surface curve, seen from outside along it."""
-    faces = geometry.mesh.faces
-    nv = len(geometry.mesh.vertices)
-    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
-    keys = directed[:, 0] * nv + directed[:, 1]
-    order = np.argsort(keys)
-    keys, owner = keys[order], (order // 3)
-    sides = {}
-    for index, curve in enumerate(features.curves):
-        if not curve.on_surface or curve.vertices is None:
-            continue
-        v = np.asarray(curve.vertices)
-        a, b = (v, np.roll(v, -1)) if curve.closed else (v[:-1], v[1:])
-        found = []
-        for edge in (a * nv + b, b * nv + a):
-            at = np.clip(np.searchsorted(keys, edge), 0, len(keys) - 1)
-            hit = keys[at] == edge
-            patches = features.face_patch[owner[at[hit]]]
-            found.append(int(np.bincount(patches).argmax()) if len(patches) else -1)
-        sides[index] = tuple(found)
-    return sides
 
 
 def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:

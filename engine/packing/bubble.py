@@ -34,6 +34,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..errors import KnowledgeError
+from ..features import curves_meeting
 from ..progress import progress
 from ..sizing import NODES_PER_H3
 from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
@@ -356,27 +357,13 @@ def _touching_curves(features) -> sparse.csr_matrix:
     Curves that leave a corner together (a round dying tangentially into a wall: the wall's edge and the round's
     arc) run closer than h near it however their bubbles sit: bubbles that saw each other pushed one of them
     onto the corner (3.5 deg tets); each packed on its own, their first nodes sit h from the corner."""
-    corners = np.array([c.point for c in features.corners]).reshape(-1, 3)
-    ends = np.array([[curve.points[0], curve.points[-1]] for curve in features.curves]).reshape(-1, 2, 3)
-    if len(corners) == 0 or len(ends) == 0:
-        return sparse.identity(len(features.curves), dtype=bool, format="csr")
-    scale = float(np.ptp(np.concatenate([corners, ends.reshape(-1, 3)]), axis=0).max()) or 1.0
-    gap, corner = cKDTree(corners).query(ends.reshape(-1, 3))
-    on = np.flatnonzero(gap <= 1e-9 * scale)
-    curve, end = on // 2, on % 2  # each incidence: a curve, which of its ends, the corner there
+    curve, end, other, other_end = curves_meeting(features)
     leaving = np.array([_first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
-    order = np.argsort(corner[on], kind="stable")
-    curve, leaving, at = curve[order], leaving[order], corner[on][order]
-    rows, cols = [np.arange(len(features.curves))], [np.arange(len(features.curves))]
-    for offset in range(1, len(at)):  # pairs of incidences at one corner, offset apart in corner order
-        same = np.flatnonzero(at[offset:] == at[:-offset])
-        if len(same) == 0:
-            break
-        apart = np.einsum("ij,ij->i", leaving[same], leaving[same + offset]) < np.cos(np.radians(LEAVING_TOGETHER))
-        rows += [curve[same[apart]], curve[same[apart] + offset]]
-        cols += [curve[same[apart] + offset], curve[same[apart]]]
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    leaving_too = np.array([_first_segment(features.curves[c], e) for c, e in zip(other, other_end)]).reshape(-1, 3)
+    apart = np.einsum("ij,ij->i", leaving, leaving_too) < np.cos(np.radians(LEAVING_TOGETHER))
     count = len(features.curves)
+    rows = np.concatenate([np.arange(count), curve[apart], other[apart]])
+    cols = np.concatenate([np.arange(count), other[apart], curve[apart]])
     return sparse.csr_matrix((np.ones(len(rows), bool), (rows, cols)), shape=(count, count)).astype(bool)
 
 
