@@ -116,6 +116,7 @@ def test_every_job_gets_the_always_placed_patterns_unless_it_places_them_itself(
         "uniform-domain",
         "thin-wall",
         "narrow-gap",
+        "narrow-face",
         "curvature",
     ]
     assert [p.pattern for p in job_placements(job_from_dict({**plate, "recipe": "static-stress"}), KB)] == [
@@ -124,6 +125,7 @@ def test_every_job_gets_the_always_placed_patterns_unless_it_places_them_itself(
         "re-entrant-edge",
         "thin-wall",
         "narrow-gap",
+        "narrow-face",
         "curvature",
     ]
     place = [{"pattern": "uniform-domain"}, {"pattern": "thin-wall", "parameters": {"through": 3}}]
@@ -132,6 +134,7 @@ def test_every_job_gets_the_always_placed_patterns_unless_it_places_them_itself(
         ("uniform-domain", {}),
         ("thin-wall", {"through": 3}),
         ("narrow-gap", {}),
+        ("narrow-face", {}),
         ("curvature", {}),
     ]
     assert KB.patterns["thin-wall"].dominance == "tie" and KB.patterns["thin-wall"].scale == "wall_thickness"

@@ -12,7 +12,7 @@ from ..yamlfile import Located
 from .common import OVERRIDES, _err, _expression
 from .values import check_values
 
-ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap", "curvature")
+ANCHORS = ("point", "curve", "surface", "region", "domain", "thin-wall", "narrow-gap", "narrow-face", "curvature")
 LAWS = ("constant", "linear", "geometric", "power")
 SCALES = (
     "none",
@@ -23,11 +23,18 @@ SCALES = (
     "edge_gap",
     "wall_thickness",
     "gap_width",
+    "face_width",
     "curvature_radius",
 )
 DOMINANCE = ("membership", "tie")
-# anchors on classes of surface pieces of like measure (engine/thickness.py, engine/curvature.py), and their L
-LOCAL_SCALES = {"thin-wall": "wall_thickness", "narrow-gap": "gap_width", "curvature": "curvature_radius"}
+# anchors on classes of surface pieces of like measure (engine/thickness.py, engine/facewidth.py,
+# engine/curvature.py), and their L
+LOCAL_SCALES = {
+    "thin-wall": "wall_thickness",
+    "narrow-gap": "gap_width",
+    "narrow-face": "face_width",
+    "curvature": "curvature_radius",
+}
 
 
 @dataclass

@@ -13,6 +13,7 @@ import numpy as np
 from ..anchors import DomainDistance, SampledDistance, curve_distance, patch_distance
 from ..curvature import curvature
 from ..errors import KnowledgeError
+from ..facewidth import narrow_faces
 from ..fuzzy import Term
 from ..knowledge import LOCAL_SCALES, KnowledgeBase, Placement, Zone, check_placement, expression_value, zone_values
 from ..regions import RegionDistance
@@ -164,7 +165,7 @@ def bind(kb: KnowledgeBase, placements: list[Placement], features, geometry, glo
     for placement in placements:
         pattern = check_placement(kb, placement)
         raised = _volume_budget(pattern, placement, features, geometry, global_size)
-        anchors = _anchors(pattern, placement, features, geometry)
+        anchors = _anchors(pattern, placement, features, geometry, global_size)
         local = pattern.anchor in LOCAL_SCALES
         if not anchors and not local:
             log.info(
@@ -229,19 +230,20 @@ def _raised(placement, per_circle: float | None):
     return replace(placement, parameters={**placement.parameters, "per_circle": per_circle})
 
 
-def _anchors(pattern, placement, features, geometry):
-    """[(feature or None, spacing -> distance object)] for the placement."""
+def _anchors(pattern, placement, features, geometry, global_size):
+    """[(feature or None, spacing -> distance object)] for the placement (H = ``global_size``)."""
     if pattern.anchor == "domain":
         return [(None, lambda spacing: DomainDistance())]
     if pattern.anchor == "region":
         region = RegionDistance(placement.region, placement.source)
         return [(None, lambda spacing: region)]
     if pattern.anchor in LOCAL_SCALES:
-        parts = (
-            curvature(geometry, features.feature_angle).parts()
-            if pattern.anchor == "curvature"
-            else local_size(geometry).parts(pattern.anchor)
-        )
+        if pattern.anchor == "curvature":
+            parts = curvature(geometry, features.feature_angle).parts()
+        elif pattern.anchor == "narrow-face":
+            parts = narrow_faces(geometry, features, global_size)
+        else:
+            parts = local_size(geometry).parts(pattern.anchor)
         return [(part, part.distance) for part in parts]
     if pattern.anchor == "point":
         if placement.point is not None:
