@@ -3,7 +3,8 @@
 A face narrower than the elements around it (a gear tooth's 0.25 mm chamfer at h 0.4, a 1 mm chamfer at h 4)
 gets its curve nodes on both edges h apart along them, and the tetrahedra across it are flat; the thin-wall and
 narrow-gap rules measure the solid between opposite faces, and see none of it. The width is measured between
-samples of the curves, ``SAMPLES_PER_SIZE`` per element size H along each. A pair of samples counts where
+samples of the curves, ``SAMPLES_PER_SIZE`` per element size H along each (``MAX_SAMPLES`` at most). A pair of
+samples counts where
 
 - the two curves share no corner (curves that meet, at an acute corner or a cusp, are packed each on its own
   by the bubble packer, and more elements there would only make the corner's triangles smaller, not better),
@@ -31,6 +32,8 @@ SAMPLES_PER_SIZE = 10  # curve samples per H along each curve
 REACH = 1.0  # widths up to this x H are measured (the pattern asks for stretch x L, below H only where L < H / stretch)
 ALONG = 3.0  # two samples of one curve are across a face when this x their distance apart along it
 ON_PATCH = 0.1  # the segment's midpoint lies within this x its length of the common patch
+MAX_SAMPLES = 200_000  # curve samples at most (a size far below the model's, which the element-count guard
+# refuses after the patterns are bound, would ask for millions)
 
 
 def narrow_faces(geometry, features, size: float) -> list[LocalPart]:
@@ -44,7 +47,8 @@ def facet_widths(geometry, features, size: float) -> np.ndarray:
     """(f,) the width of the face at each input facet (module doc), inf where not narrower than REACH x size."""
     width = np.full(len(geometry.mesh.faces), np.inf)
     sides = curve_sides(geometry, features)
-    points, curve, along = _samples(features, sides, size / SAMPLES_PER_SIZE)
+    total = sum(features.curves[c].length for c in sides)
+    points, curve, along = _samples(features, sides, max(size / SAMPLES_PER_SIZE, total / MAX_SAMPLES))
     bounding = np.array([sides[c] for c in curve]).reshape(-1, 2)
     a, b, patch = [], [], []
     for p in np.unique(bounding[bounding >= 0]):  # pairs of samples around each patch
