@@ -216,6 +216,8 @@ def _check_self_intersections(
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces.astype(np.int32)))
     ms.compute_selection_by_self_intersections_per_face()
     selected = ms.current_mesh().face_selection_array().astype(bool)
+    if selected.any():
+        selected = _crossing(np.asarray(mesh.vertices), np.asarray(mesh.faces), selected)
     shells = np.unique(face_shell[selected])
     if len(shells) > 1:
         raise _touch_error(source, shell_body, shells[0], shells[1])
@@ -225,6 +227,23 @@ def _check_self_intersections(
             where=source,
             fix="union the overlapping bodies or repair the surface",
         )
+
+
+def _crossing(vertices: np.ndarray, faces: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Per face, whether it crosses or touches another of the ``candidates`` (per face: pymeshlab's selection),
+    by CGAL's exact predicates (libigl). pymeshlab's test of a pair is not symmetric (two coplanar triangles 1 mm
+    apart "cross" when the later one is tested first) and which orders it tests depends on the process: after a
+    few calls of its get_topological_measures (engine/quality.py, once per mesh; four on a tetrahedron, three
+    meshes of test_cad.py) it tests both, for good. Its selection alone thus depended on the faces' order and on
+    what the process had run before (issue 17: a CAD assembly's tessellation refused after other meshes in one
+    process, the faces meshed by Gmsh instead and the assembly rejected, met in a fresh process)."""
+    from igl.copyleft.cgal import remesh_self_intersections
+
+    index = np.flatnonzero(candidates)
+    pairs = remesh_self_intersections(vertices, faces[index].astype(np.int64), detect_only=True)[2]
+    out = np.zeros(len(faces), bool)
+    out[index[pairs.ravel()]] = True
+    return out
 
 
 def _make_consistent(mesh: trimesh.Trimesh, source: str) -> list[str]:
