@@ -69,7 +69,7 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
         start = corner_at_vertex.get(int(curve.vertices[0]))
         end = None if curve.closed else corner_at_vertex.get(int(curve.vertices[-1]))
         chain = np.concatenate([[start] if start is not None else [], ordered, [end] if end is not None else []])
-        chains[index] = chain[np.r_[True, np.diff(chain) != 0]].astype(np.int64)  # a short curve's ends: one node
+        chains[index] = chain[np.diff(chain, prepend=-1) != 0].astype(np.int64)  # a short curve's ends: one node
     return chains
 
 
