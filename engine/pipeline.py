@@ -417,7 +417,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
     there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
     log.info(
         "boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
-        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g; area %+.3f %%, volume %+.3f %% of the "
+        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g%s; area %+.3f %%, volume %+.3f %% of the "
         "input's; triangle quality min %.3f (%.2f s)",
         boundary["triangles"],
         "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
@@ -429,6 +429,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         back["max"],
         back["max_over_h"],
         back["mean"],
+        f" (x h: less the tessellation's sagitta {geometry.chord:.3g})" if geometry.chord else "",
         100 * (boundary["area"] / boundary["input_area"] - 1),
         100 * (boundary["volume"] / boundary["input_volume"] - 1),
         boundary["triangle_quality"]["min"],

@@ -386,3 +386,26 @@ def test_bodies_named_alike_get_numbers_in_file_order():
 
     assert _numbered(["nut", "rod", "nut", "plate", "nut"]) == ["nut-1", "rod", "nut-2", "plate", "nut-3"]
     assert _numbered(["solid-1", "solid-2"]) == ["solid-1", "solid-2"]
+
+
+def test_the_gate_does_not_charge_a_cad_mesh_with_the_tessellation_s_chords(step_files):
+    """A CAD part's input surface is OpenCASCADE's tessellation, up to its sagitta (DEFLECTION x the model size)
+    off the CAD faces, where the mesh's nodes are: an outside test's collar (a 0.08 mm sliver wall made h 0.07
+    there) was refused for a node on the CAD cylinder 0.03 from a facet (0.42 h). A fine cylinder (the mesh on
+    the CAD) against a coarse one (the tessellation, 16 sides): far over h, unless the sagitta is allowed for."""
+    import trimesh
+
+    from engine.cad import DEFLECTION
+    from engine.quality import surface_distances
+
+    geometry, _ = load_cad(step_files["box_with_holes"][0])
+    assert geometry.chord == pytest.approx(DEFLECTION * np.linalg.norm(np.ptp(geometry.bounds, axis=0)))
+    tessellation = trimesh.creation.cylinder(radius=20.0, height=10.0, sections=16)
+    mesh = trimesh.creation.cylinder(radius=20.0, height=10.0, sections=720)
+    sagitta = 20.0 * (1 - np.cos(np.pi / 16))
+    tiny = lambda x: np.full(len(x), 0.05)  # noqa: E731  elements far smaller than the facets
+    plain = surface_distances(mesh.vertices, mesh.faces, tessellation, tiny, 5000)
+    assert plain["mesh_to_input"]["max"] == pytest.approx(sagitta, rel=0.01)
+    assert plain["mesh_to_input"]["max_over_h"] > 7
+    allowed = surface_distances(mesh.vertices, mesh.faces, tessellation, tiny, 5000, chord=sagitta)
+    assert allowed["mesh_to_input"]["max_over_h"] < 0.01 and allowed["input_to_mesh"]["max_over_h"] < 0.01
