@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FuzzymeshError, JobError
+from .errors import FuzzymeshError, JobError, LimitError
 
 log = logging.getLogger("fuzzymesh")
 
@@ -81,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--max-elements",
         type=_positive_float,
         default=None,
-        help="refuse jobs expected to exceed this many tetrahedra (default 2e7)",
+        help="refuse jobs expected to exceed this many tetrahedra (default 2e7, or fewer: what this machine's "
+        "memory holds at about 3.5 kB per tetrahedron)",
     )
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
     mesh.add_argument(
@@ -526,7 +527,7 @@ def _cmd_batch(args) -> int:
 
 def _cmd_mesh(args) -> int:
     from .job import default_job, load_job
-    from .pipeline import DEFAULT_MAX_ELEMENTS, run
+    from .pipeline import run
 
     job = load_job(args.job) if args.job else default_job()
     overrides = {}
@@ -537,7 +538,7 @@ def _cmd_mesh(args) -> int:
     if args.seed is not None:
         overrides["seed"] = args.seed
     job = dataclasses.replace(job, **overrides)
-    result = run(job, max_elements=args.max_elements or DEFAULT_MAX_ELEMENTS, keep_invalid=args.keep_invalid)
+    result = run(job, max_elements=args.max_elements, keep_invalid=args.keep_invalid)
     total = sum(result.timings.values())
     log.info("done: %d tetrahedra, %d nodes in %.2f s", len(result.mesh.tets), len(result.mesh.points), total)
     return 0
@@ -591,6 +592,13 @@ def _run(argv: list[str] | None) -> int:
     except KeyboardInterrupt:
         print("fuzzymesh: interrupted", file=sys.stderr)
         return 130
+    except MemoryError as error:  # the estimate passed the guard but the machine ran out: a limit, not a fault
+        limit = LimitError(
+            f"out of memory ({error or 'an allocation failed'}): the mesh needs more memory than this machine has",
+            fix="use larger sizes, or a smaller --max-elements so that such jobs are refused before the work",
+        )
+        print(f"fuzzymesh: error: {limit.one_line()}", file=sys.stderr)
+        return limit.exit_code
     except Exception as error:  # an internal fault, not the user's: one line unless --debug
         if args.debug:
             raise

@@ -98,8 +98,18 @@ class Curvature:
         return np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1) / 2
 
 
-def curvature(geometry, feature_angle: float) -> Curvature:
-    """The geometry's radius of curvature, measured on the first call per feature angle and kept with it."""
+def curvature(geometry, feature_angle: float, assembly=None) -> Curvature:
+    """The geometry's radius of curvature, measured on the first call per feature angle and kept with it. Of
+    an ``assembly`` (engine/cad.py ``Assembly``, whose union ``geometry`` is): every body's surface, each face
+    once per body, the interfaces included: a bolt's shank in a plate's hole is no face of the union (its
+    two sides' chords change the bodies' volumes, not the union's: their mean curvatures cancel)."""
+    if assembly is not None:
+        bodies = [curvature(body, feature_angle) for body, _ in assembly.bodies]
+        return Curvature(
+            triangles=np.concatenate([b.triangles for b in bodies]),
+            radius=np.concatenate([b.radius for b in bodies]),
+            mean=np.concatenate([b.mean for b in bodies]),
+        )
     cache = geometry.__dict__.setdefault("_curvature", {})
     if feature_angle not in cache:
         cache[feature_angle] = measure(geometry.mesh, feature_angle)

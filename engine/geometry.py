@@ -36,6 +36,8 @@ class Geometry:
     source: str
     face_body: np.ndarray  # the body (separate solid, 0-based) each face bounds; a cavity's is the solid around it
     notes: list[str] = field(default_factory=list)
+    chord: float = 0.0  # how far the surface may lie from the true one it stands for (a CAD tessellation's
+    # sagitta, engine/cad.py); 0 where the surface is the input itself (an STL)
 
     @property
     def bodies(self) -> int:

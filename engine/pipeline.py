@@ -40,7 +40,6 @@ from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
 
 log = logging.getLogger("fuzzymesh")
 
-DEFAULT_MAX_ELEMENTS = 20_000_000
 SIZE_FROM_SCALE = 40.0  # default global size = model size (bounding-box diagonal) / this
 
 
@@ -222,9 +221,10 @@ class Prepared(NamedTuple):
     sizing: SizingField
 
 
-def prepare(job: Job, max_elements: float = DEFAULT_MAX_ELEMENTS, timings: dict | None = None) -> Prepared:
+def prepare(job: Job, max_elements: float | None = None, timings: dict | None = None) -> Prepared:
     """The job's knowledge (loaded and checked against the job), geometry, features and sizing field, logged
-    with their times in ``timings``; refuses a sizing needing more than ``max_elements`` tetrahedra. The
+    with their times in ``timings``; refuses a sizing needing more than ``max_elements`` tetrahedra (None:
+    20 million, or what this machine's memory holds, engine/sizing/counts.py). The
     one way to get there: the pipeline, ``fuzzymesh explain``, tests and benchmarks."""
     timings = {} if timings is None else timings
     kb = load_knowledge(job.knowledge)
@@ -346,9 +346,7 @@ def _mesh_assembly(job: Job, packer, mesher, geometry, features, sizing, kb, tim
     return packing, mesh
 
 
-def run(
-    job: Job, *, max_elements: float = DEFAULT_MAX_ELEMENTS, write: bool = True, keep_invalid: bool = False
-) -> Result:
+def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep_invalid: bool = False) -> Result:
     """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
     outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
     or, with ``keep_invalid``, writes the files as ``<name>.invalid.*`` first."""
@@ -419,7 +417,7 @@ def run(
     there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
     log.info(
         "boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
-        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g; area %+.3f %%, volume %+.3f %% of the "
+        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g%s; area %+.3f %%, volume %+.3f %% of the "
         "input's; triangle quality min %.3f (%.2f s)",
         boundary["triangles"],
         "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
@@ -431,6 +429,7 @@ def run(
         back["max"],
         back["max_over_h"],
         back["mean"],
+        f" (x h: less the tessellation's sagitta {geometry.chord:.3g})" if geometry.chord else "",
         100 * (boundary["area"] / boundary["input_area"] - 1),
         100 * (boundary["volume"] / boundary["input_volume"] - 1),
         boundary["triangle_quality"]["min"],

@@ -86,9 +86,13 @@ def _metrics(points, tets):
     return volume, radius_ratio, mean_ratio, min_dihedral, max_dihedral, aspect
 
 
-def surface_distances(points: np.ndarray, triangles: np.ndarray, surface, size, samples: int) -> dict:
+def surface_distances(
+    points: np.ndarray, triangles: np.ndarray, surface, size, samples: int, chord: float = 0.0
+) -> dict:
     """The two-sided Hausdorff distance between a boundary (points (n, 3), triangles (t, 3)) and the input
-    ``surface`` (a trimesh), absolute and over the target size ``size(x) -> h`` at each sample.
+    ``surface`` (a trimesh), absolute and over the target size ``size(x) -> h`` at each sample; the latter
+    less ``chord``, how far ``surface`` may lie from the true surface it stands for (a CAD file's tessellation:
+    a mesh whose nodes are on the CAD faces is not charged with the facets' sagitta).
 
     Each side is sampled at its vertices, its edge midpoints and ``samples`` area-weighted points (seeded,
     so deterministic); every sample's distance to the other side is exact (libigl's AABB tree). Returns
@@ -111,7 +115,7 @@ def surface_distances(points: np.ndarray, triangles: np.ndarray, surface, size, 
             np.ascontiguousarray(target.faces, dtype=np.int64),
         )
         distance = np.sqrt(d2)
-        ratio = distance / size(at)
+        ratio = np.maximum(distance - chord, 0.0) / size(at)
         worst = int(np.argmax(ratio))
         out[name] = {
             "max": float(distance.max()),
@@ -225,7 +229,7 @@ def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
     meshes.set_current_mesh(1)
     reference = meshes.get_geometric_measures()
 
-    distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples)
+    distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples, geometry.chord)
     return {
         "triangles": int(len(boundary)),
         "triangle_quality": {

@@ -828,8 +828,47 @@ def test_impossible_size_hits_element_limit(capsys, tmp_path):
     code, _, err = run_cli(capsys, job)
     line = error_line(err)
     assert code == 2
-    assert "tetrahedra (limit 2e+07)" in line and "--max-elements" in line and "larger size" in line
+    assert "tetrahedra (limit " in line and "--max-elements" in line and "larger size" in line
     assert not mesh_files(tmp_path)
+
+
+def test_the_default_limit_is_what_the_machine_s_memory_holds(capsys, tmp_path, monkeypatch):
+    """With no --max-elements the guard's limit is 2e7, or fewer on a machine whose memory holds fewer at the
+    measured peak per tetrahedron: an outside test's heat sink (1e7 tets at its default size) ran 70 s and
+    died of a MemoryError (exit 3), or was killed by the kernel with no message at all."""
+    from engine.sizing import counts
+
+    monkeypatch.setattr(counts, "physical_memory", lambda: 2**30)  # 1 GiB: about 3e5 tetrahedra
+    job = write_job(
+        tmp_path,
+        """
+        geometry:
+          shape: plate_cylinder_junction
+        size: 2
+        output:
+          directory: out
+        """,
+    )
+    code, _, err = run_cli(capsys, job)
+    line = error_line(err)
+    assert code == 2 and "1.0 GiB at about 3.5 kB per tetrahedron" in line and "--max-elements" in line
+    assert not mesh_files(tmp_path)
+    assert counts.default_element_limit()[0] == pytest.approx(2**30 / counts.PEAK_BYTES_PER_TET)
+    monkeypatch.setattr(counts, "physical_memory", lambda: 2.0**40)
+    assert counts.default_element_limit()[0] == counts.MAX_ELEMENTS
+
+
+def test_running_out_of_memory_is_one_line(capsys, tmp_path, monkeypatch):
+    import engine.pipeline
+
+    def starved(*args, **kwargs):
+        raise MemoryError("Unable to allocate 3.99 GiB for an array with shape (178732484, 3)")
+
+    monkeypatch.setattr(engine.pipeline, "run", starved)
+    job = write_job(tmp_path, "geometry:\n  shape: plate\noutput:\n  directory: out\n")
+    code, _, err = run_cli(capsys, job)
+    line = error_line(err)
+    assert code == 2 and "out of memory" in line and "3.99 GiB" in line and "--max-elements" in line
 
 
 def test_max_elements_option_is_honoured(capsys, tmp_path):

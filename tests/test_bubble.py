@@ -112,3 +112,48 @@ def test_population_control_restores_the_count(density, action, rule_base):
 def test_same_seed_same_packing():
     a, b = pack(CYLINDER), pack(CYLINDER)
     assert np.array_equal(a.points, b.points) and np.array_equal(a.level, b.level)
+
+
+@pytest.fixture(scope="module")
+def wedge_prism(tmp_path_factory):
+    """An STL prism 6 thick on a triangle whose corner at the origin is 10 deg (sides 40 and 36 long, its other
+    corners 54 and 116 deg): the two edges leaving that corner on each face leave it together."""
+    import trimesh
+
+    angle = np.radians(10.0)
+    outline = np.array([(0.0, 0.0), (40.0, 0.0), (36 * np.cos(angle), 36 * np.sin(angle))])
+    vertices = np.vstack([np.column_stack([outline, np.zeros(3)]), np.column_stack([outline, np.full(3, 6.0)])])
+    faces = [[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]
+    path = tmp_path_factory.mktemp("wedge") / "wedge.stl"
+    trimesh.Trimesh(vertices, faces).export(path)
+    return path
+
+
+def test_curves_leaving_a_corner_together_start_at_one_distance(wedge_prism):
+    """A concentric shell at an acute corner (bubble._shells_at_acute_corners): the first bubbles of the two
+    curves at the mean of their distances from it, the bubbles after them where they were. Found on an outside
+    test's bearing cartridge (a counterbore cutting a boss fillet, 10.8 deg corners): first nodes 0.43 and 0.97 h
+    from the corner, a 164 deg triangle and a 6.8 deg tetrahedron; with the shells 11.1 deg."""
+    from engine.packing.bubble import _leaving_together, _shells_at_acute_corners
+
+    _, features, _ = prepared({"geometry": {"file": str(wedge_prism)}})
+    curve, end, other, other_end, together = _leaving_together(features)
+    top = [k for k in np.flatnonzero(together) if features.curves[curve[k]].points[:, 2].min() > 5.9]
+    assert len(top) == 1  # the top face's two edges at the 10 deg corner (the bottom's are the other pair)
+    pair = [(curve[top[0]], end[top[0]]), (other[top[0]], other_end[top[0]])]
+
+    def along(c, e, distance):  # points at these distances from curve c's end e
+        feature = features.curves[c]
+        return feature.point_at(np.asarray(distance) if e == 0 else feature.length - np.asarray(distance))
+
+    points = np.vstack([along(*pair[0], [0.43, 1.4, 2.4]), along(*pair[1], [0.97, 1.9, 2.9])])
+    entity = np.repeat([pair[0][0], pair[1][0]], 3)
+    moved = _shells_at_acute_corners(points, entity, features)
+    for (c, e), rows in zip(pair, (slice(0, 3), slice(3, 6))):
+        s = features.curves[c].parameter(moved[rows])
+        distance = s if e == 0 else features.curves[c].length - s
+        assert distance[0] == pytest.approx(0.70, abs=1e-9)
+        np.testing.assert_allclose(moved[rows][1:], points[rows][1:])
+    # a first bubble that would pass half the way to its neighbour stays
+    crowded = np.vstack([along(*pair[0], [0.2, 0.5, 1.5]), along(*pair[1], [0.97, 1.9, 2.9])])
+    np.testing.assert_allclose(_shells_at_acute_corners(crowded, entity, features), crowded)

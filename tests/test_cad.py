@@ -66,6 +66,13 @@ def cylinder_on_plate():
     occ.addCylinder(5, 0, 8, 0, 0, 20, 10)
 
 
+def pin_in_plate():
+    """A pin of radius 3 filling a through hole of a 60 x 40 x 10 plate, flush with both faces: its whole
+    curved face is the interface, the union a box with no curved face."""
+    make_parts._cut(occ.addBox(0, 0, 0, 60, 40, 10), occ.addCylinder(30, 20, 0, 0, 0, 10, 3))
+    occ.addCylinder(30, 20, 0, 0, 0, 10, 3)
+
+
 def split_hole():
     """A 60 x 40 x 10 plate with a hole of radius 6 whose wall is two half-cylinder faces (as exporters split
     periodic faces)."""
@@ -92,6 +99,7 @@ PARTS = {
     "junction": junction,
     "two_boxes": two_boxes,
     "cylinder_on_plate": cylinder_on_plate,
+    "pin_in_plate": pin_in_plate,
     "apart": apart,
     "split_hole": split_hole,
     "faces_only": faces_only,
@@ -272,6 +280,22 @@ def test_an_assembly_meshes_through_the_cli(step_files, tmp_path, part, size, or
     assert {tuple(row) for row in in_med.tolist()} == {tuple(row) for row in interface.tolist()}
 
 
+def test_a_curved_interface_gets_the_curvature_rule(step_files, tmp_path):
+    """The curvature rule measures every body's faces, the interfaces too: a pin filling a plate's hole (the
+    union a box: no curved face) was meshed at H, 10 elements round it, its volume -5 % and the mesh refused.
+    Now 24 per circle (about -1.1 %, the chords); the union's volume budget sees the pin's and the hole's
+    chords cancel and raises nothing."""
+    path, _ = step_files["pin_in_plate"]
+    job = _cli_job(tmp_path, path)
+    assert main(["mesh", str(job), "--quiet"]) == 0
+    mesh = meshio.read(tmp_path / "out" / "mesh.msh")
+    pin = _groups(mesh)["solid-2"]
+    volume = signed_volumes(mesh.points, pin[:, :4]).sum()
+    assert volume == pytest.approx(math.pi * 9 * 10, rel=0.015)
+    assert volume < math.pi * 9 * 10  # the chords, not another body's tets
+    assert min_dihedrals(mesh.points, _groups(mesh)["solid"][:, :4]).min() >= 10
+
+
 def test_an_assembly_body_off_its_cad_volume_is_rejected(step_files, tmp_path, capsys):
     """The gate's body volume: the union within 0.3 % of the CAD's, the cylinder's chords at size 2 without the
     curvature pattern not; one line, exit 4, no files."""
@@ -362,3 +386,26 @@ def test_bodies_named_alike_get_numbers_in_file_order():
 
     assert _numbered(["nut", "rod", "nut", "plate", "nut"]) == ["nut-1", "rod", "nut-2", "plate", "nut-3"]
     assert _numbered(["solid-1", "solid-2"]) == ["solid-1", "solid-2"]
+
+
+def test_the_gate_does_not_charge_a_cad_mesh_with_the_tessellation_s_chords(step_files):
+    """A CAD part's input surface is OpenCASCADE's tessellation, up to its sagitta (DEFLECTION x the model size)
+    off the CAD faces, where the mesh's nodes are: an outside test's collar (a 0.08 mm sliver wall made h 0.07
+    there) was refused for a node on the CAD cylinder 0.03 from a facet (0.42 h). A fine cylinder (the mesh on
+    the CAD) against a coarse one (the tessellation, 16 sides): far over h, unless the sagitta is allowed for."""
+    import trimesh
+
+    from engine.cad import DEFLECTION
+    from engine.quality import surface_distances
+
+    geometry, _ = load_cad(step_files["box_with_holes"][0])
+    assert geometry.chord == pytest.approx(DEFLECTION * np.linalg.norm(np.ptp(geometry.bounds, axis=0)))
+    tessellation = trimesh.creation.cylinder(radius=20.0, height=10.0, sections=16)
+    mesh = trimesh.creation.cylinder(radius=20.0, height=10.0, sections=720)
+    sagitta = 20.0 * (1 - np.cos(np.pi / 16))
+    tiny = lambda x: np.full(len(x), 0.05)  # noqa: E731  elements far smaller than the facets
+    plain = surface_distances(mesh.vertices, mesh.faces, tessellation, tiny, 5000)
+    assert plain["mesh_to_input"]["max"] == pytest.approx(sagitta, rel=0.01)
+    assert plain["mesh_to_input"]["max_over_h"] > 7
+    allowed = surface_distances(mesh.vertices, mesh.faces, tessellation, tiny, 5000, chord=sagitta)
+    assert allowed["mesh_to_input"]["max_over_h"] < 0.01 and allowed["input_to_mesh"]["max_over_h"] < 0.01

@@ -184,6 +184,7 @@ def pack_bubbles(geometry, features, sizing, *, seed: int = 0, knowledge=None, i
             clear = _clear_of_ends(state.x, state.entity, features, run.bubbles(state.x))
             run.dropped_at_curve_ends = int(np.count_nonzero(~clear))
             state.x, state.entity, state.ids = state.x[clear], state.entity[clear], state.ids[clear]
+            state.x = _shells_at_acute_corners(state.x, state.entity, features)
         points = state.x
         parts.append(
             Packing(
@@ -357,14 +358,55 @@ def _touching_curves(features) -> sparse.csr_matrix:
     Curves that leave a corner together (a round dying tangentially into a wall: the wall's edge and the round's
     arc) run closer than h near it however their bubbles sit: bubbles that saw each other pushed one of them
     onto the corner (3.5 deg tets); each packed on its own, their first nodes sit h from the corner."""
-    curve, end, other, other_end = curves_meeting(features)
-    leaving = np.array([_first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
-    leaving_too = np.array([_first_segment(features.curves[c], e) for c, e in zip(other, other_end)]).reshape(-1, 3)
-    apart = np.einsum("ij,ij->i", leaving, leaving_too) < np.cos(np.radians(LEAVING_TOGETHER))
+    curve, end, other, other_end, together = _leaving_together(features)
+    apart = ~together
     count = len(features.curves)
     rows = np.concatenate([np.arange(count), curve[apart], other[apart]])
     cols = np.concatenate([np.arange(count), other[apart], curve[apart]])
     return sparse.csr_matrix((np.ones(len(rows), bool), (rows, cols)), shape=(count, count)).astype(bool)
+
+
+def _leaving_together(features):
+    """:func:`engine.features.curves_meeting`'s pairs of curve ends at one corner, and (k,) whether the two
+    curves leave the corner closer than LEAVING_TOGETHER between their first segments."""
+    curve, end, other, other_end = curves_meeting(features)
+    leaving = np.array([_first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
+    leaving_too = np.array([_first_segment(features.curves[c], e) for c, e in zip(other, other_end)]).reshape(-1, 3)
+    together = np.einsum("ij,ij->i", leaving, leaving_too) >= np.cos(np.radians(LEAVING_TOGETHER))
+    return curve, end, other, other_end, together
+
+
+def _shells_at_acute_corners(points, entity, features) -> np.ndarray:
+    """``points`` (curve bubbles) with the first bubble of each of two curves that leave a corner together at
+    one distance from it, the mean of theirs (a concentric shell, as Ruppert's refinement splits the segments
+    of a small input angle): packed each on its own, they sat 0.43 and 0.97 h from a 10.8 deg corner and the
+    face's triangle there had a 164 deg angle. A move that would bring a bubble past half the way to its
+    neighbour along the curve is not made."""
+    curve, end, other, other_end, together = _leaving_together(features)
+    points = points.copy()
+    for a, end_a, b, end_b in zip(curve[together], end[together], other[together], other_end[together]):
+        first = [_first_along(points, entity, features.curves[c], c, e) for c, e in ((a, end_a), (b, end_b))]
+        if any(f is None for f in first):
+            continue
+        shell = (first[0][1] + first[1][1]) / 2
+        if all(shell <= (distance + next_distance) / 2 for _, distance, next_distance in first):
+            for (row, _, _), c, e in zip(first, (a, b), (end_a, end_b)):
+                length = features.curves[c].length
+                points[row] = features.curves[c].point_at(np.array([shell if e == 0 else length - shell]))[0]
+    return points
+
+
+def _first_along(points, entity, curve, key: int, end: int):
+    """(row, distance, next distance) along ``curve`` from its start (``end`` 0) or end (1) of its bubble
+    nearest that end and of the one after it (inf if none), or None if the curve has no bubble."""
+    rows = np.flatnonzero(entity == key)
+    if len(rows) == 0:
+        return None
+    s = curve.parameter(points[rows])
+    distance = s if end == 0 else curve.length - s
+    order = np.argsort(distance)
+    after = distance[order[1]] if len(rows) > 1 else np.inf
+    return rows[order[0]], distance[order[0]], after
 
 
 def _first_segment(curve, end: int) -> np.ndarray:

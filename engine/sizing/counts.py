@@ -4,6 +4,7 @@ the bubble packings) and the guard that refuses a job before packing when it wou
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import trimesh
@@ -11,6 +12,10 @@ import trimesh
 from ..errors import LimitError
 
 TETS_PER_NODE = 5.5  # tetrahedra per node of a well-spaced Delaunay mesh
+MAX_ELEMENTS = 20_000_000  # the default limit of the guard, where the machine's memory holds more
+PEAK_BYTES_PER_TET = 3500.0  # memory at the run's peak per tetrahedron: measured 1.5 kB (a flanged tee, 1.07M
+# tets, default job), 1.65 kB (32 patterns, 1.58M) and 3.2 kB (a thin ribbed shell under static-stress, 4.48M
+# tets, killed by the kernel at 14.5 GB): a job expected to need more than the machine has is refused up front
 NODES_PER_H3 = 1.43  # nodes per h^3 of volume of a mesh whose mean edge is h (fitted, see estimate_counts)
 NODES_PER_H2 = 0.32  # extra nodes per h^2 of surface (fitted, see estimate_counts)
 NODES_PER_H = 1.15  # nodes per h along a feature curve: 1 / the bubble diameter (0.87 h), see estimate_counts
@@ -58,12 +63,32 @@ def stratified_points(lo: np.ndarray, hi: np.ndarray, count: int, rng) -> np.nda
     return lo + (index + rng.random(index.shape)) * (extent / shape)
 
 
-def check_element_limit(sizing, max_elements: float) -> float:
-    """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra."""
+def physical_memory() -> float:
+    """Bytes of physical memory of this machine (inf where the platform does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return math.inf
+
+
+def default_element_limit() -> tuple[float, str]:
+    """The guard's limit when none is given: MAX_ELEMENTS, or fewer where this machine's memory holds fewer at
+    PEAK_BYTES_PER_TET; with the reason, for the message."""
+    memory = physical_memory()
+    fits = memory / PEAK_BYTES_PER_TET
+    if fits < MAX_ELEMENTS:
+        return fits, f"this machine's {memory / 2**30:.1f} GiB at about {PEAK_BYTES_PER_TET / 1e3:g} kB per tetrahedron"
+    return float(MAX_ELEMENTS), "the default"
+
+
+def check_element_limit(sizing, max_elements: float | None = None) -> float:
+    """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra (None: the default,
+    :func:`default_element_limit`)."""
     _, tets = sizing.expected_counts
-    if not math.isfinite(tets) or tets > max_elements:
+    limit, why = (max_elements, "") if max_elements is not None else default_element_limit()
+    if not math.isfinite(tets) or tets > limit:
         raise LimitError(
-            f"the sizes would need about {tets:.3g} tetrahedra (limit {max_elements:.3g}); "
+            f"the sizes would need about {tets:.3g} tetrahedra (limit {limit:.3g}{': ' + why if why else ''}); "
             f"the smallest size is {sizing.h_min:.4g}",
             fix="use larger sizes, or raise the limit with --max-elements",
         )
