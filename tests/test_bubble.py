@@ -114,39 +114,51 @@ def test_same_seed_same_packing():
     assert np.array_equal(a.points, b.points) and np.array_equal(a.level, b.level)
 
 
-@pytest.fixture(scope="module")
-def wedge_prism(tmp_path_factory):
-    """An STL prism 6 thick on a triangle whose corner at the origin is 10 deg (sides 40 and 36 long, its other
-    corners 54 and 116 deg): the two edges leaving that corner on each face leave it together."""
+def _wedge_prism(folder, degrees: float):
+    """An STL prism 6 thick on a triangle whose corner at the origin is ``degrees`` (sides 40 and 36 long): the
+    two edges leaving that corner on each face leave it together."""
     import trimesh
 
-    angle = np.radians(10.0)
+    angle = np.radians(degrees)
     outline = np.array([(0.0, 0.0), (40.0, 0.0), (36 * np.cos(angle), 36 * np.sin(angle))])
     vertices = np.vstack([np.column_stack([outline, np.zeros(3)]), np.column_stack([outline, np.full(3, 6.0)])])
     faces = [[0, 2, 1], [3, 4, 5], [0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [2, 0, 3], [2, 3, 5]]
-    path = tmp_path_factory.mktemp("wedge") / "wedge.stl"
+    path = folder / f"wedge-{degrees:g}.stl"
     trimesh.Trimesh(vertices, faces).export(path)
     return path
 
 
-def test_curves_leaving_a_corner_together_start_at_one_distance(wedge_prism):
+def _apex_pair(path):
+    """(features, [(curve, end)] x 2) of the top face's two edges at the prism's corner over the origin."""
+    from engine.packing.bubble import _leaving_together
+
+    _, features, _ = prepared({"geometry": {"file": str(path)}})
+    curve, end, other, other_end, together = _leaving_together(features)
+    at_apex = [
+        k
+        for k in np.flatnonzero(together)
+        if np.allclose(features.curves[curve[k]].points[0 if end[k] == 0 else -1], (0, 0, 6), atol=1e-6)
+    ]
+    assert len(at_apex) == 1
+    k = at_apex[0]
+    return features, [(curve[k], end[k]), (other[k], other_end[k])]
+
+
+def _along(features, c, e, distance):
+    """Points at these distances from curve c's end e."""
+    feature = features.curves[c]
+    return feature.point_at(np.asarray(distance) if e == 0 else feature.length - np.asarray(distance))
+
+
+def test_curves_leaving_a_corner_together_start_at_one_distance(tmp_path):
     """A concentric shell at an acute corner (bubble._shells_at_acute_corners): the first bubbles of the two
     curves at the mean of their distances from it, the bubbles after them where they were. Found on an outside
     test's bearing cartridge (a counterbore cutting a boss fillet, 10.8 deg corners): first nodes 0.43 and 0.97 h
     from the corner, a 164 deg triangle and a 6.8 deg tetrahedron; with the shells 11.1 deg."""
-    from engine.packing.bubble import _leaving_together, _shells_at_acute_corners
+    from engine.packing.bubble import _shells_at_acute_corners
 
-    _, features, _ = prepared({"geometry": {"file": str(wedge_prism)}})
-    curve, end, other, other_end, together = _leaving_together(features)
-    top = [k for k in np.flatnonzero(together) if features.curves[curve[k]].points[:, 2].min() > 5.9]
-    assert len(top) == 1  # the top face's two edges at the 10 deg corner (the bottom's are the other pair)
-    pair = [(curve[top[0]], end[top[0]]), (other[top[0]], other_end[top[0]])]
-
-    def along(c, e, distance):  # points at these distances from curve c's end e
-        feature = features.curves[c]
-        return feature.point_at(np.asarray(distance) if e == 0 else feature.length - np.asarray(distance))
-
-    points = np.vstack([along(*pair[0], [0.43, 1.4, 2.4]), along(*pair[1], [0.97, 1.9, 2.9])])
+    features, pair = _apex_pair(_wedge_prism(tmp_path, 10.0))
+    points = np.vstack([_along(features, *pair[0], [0.43, 1.4, 2.4]), _along(features, *pair[1], [0.97, 1.9, 2.9])])
     entity = np.repeat([pair[0][0], pair[1][0]], 3)
     moved = _shells_at_acute_corners(points, entity, features)
     for (c, e), rows in zip(pair, (slice(0, 3), slice(3, 6))):
@@ -155,5 +167,16 @@ def test_curves_leaving_a_corner_together_start_at_one_distance(wedge_prism):
         assert distance[0] == pytest.approx(0.70, abs=1e-9)
         np.testing.assert_allclose(moved[rows][1:], points[rows][1:])
     # a first bubble that would pass half the way to its neighbour stays
-    crowded = np.vstack([along(*pair[0], [0.2, 0.5, 1.5]), along(*pair[1], [0.97, 1.9, 2.9])])
+    crowded = np.vstack([_along(features, *pair[0], [0.2, 0.5, 1.5]), _along(features, *pair[1], [0.97, 1.9, 2.9])])
     np.testing.assert_allclose(_shells_at_acute_corners(crowded, entity, features), crowded)
+
+
+def test_no_shell_at_a_cusp(tmp_path):
+    """Under SHELL_ANGLE the two first bubbles would be one node twice (a wing nut's 1.8 deg cusp: 0.02 mm apart
+    at h 0.38, 3.5 deg tets): they stay where the packer put them."""
+    from engine.packing.bubble import SHELL_ANGLE, _shells_at_acute_corners
+
+    features, pair = _apex_pair(_wedge_prism(tmp_path, SHELL_ANGLE / 2))
+    points = np.vstack([_along(features, *pair[0], [0.43, 1.4, 2.4]), _along(features, *pair[1], [0.97, 1.9, 2.9])])
+    entity = np.repeat([pair[0][0], pair[1][0]], 3)
+    np.testing.assert_allclose(_shells_at_acute_corners(points, entity, features), points)
