@@ -102,8 +102,6 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
         points[slid] = geometry.closest_point(points[slid])[0]  # back onto the surface
-        tolerance = SURFACE_TOLERANCE * 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])
-        points = _chords_kept(points, unslid, boundary, slid, _on_surface(geometry), tolerance)
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
     h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])  # Steiner nodes stay inside
     repair = _Repair(
@@ -252,33 +250,6 @@ def _on_surface(geometry):
         return distance, geometry.mesh.face_normals[face]
 
     return at
-
-
-def _chords_kept(points, before, boundary, slid, surface, tolerance) -> np.ndarray:
-    """``points`` with the ``slid`` nodes of every boundary triangle that now strays farther from the input
-    surface (at its centroid and edge midpoints) than it did at ``before`` and than its nodes' smallest
-    ``tolerance`` put back where ``before`` has them, as a peel or a collapse is held (improve.py): a fillet node
-    slid 0.12 along a shaft's shoulder round left a 0.7 chord 0.055 inside it at h 0.35 (0.16 h)."""
-    moved = np.zeros(len(points), bool)
-    moved[slid] = True
-    for _ in range(RESTORE_ROUNDS):
-        touched = boundary[moved[boundary].any(axis=1)]
-        if len(touched) == 0:
-            break
-
-        def stray(x):
-            corners = x[touched]
-            samples = np.concatenate([corners.mean(axis=1)[:, None], 0.5 * (corners + np.roll(corners, 1, axis=1))], 1)
-            return surface(samples.reshape(-1, 3))[0].reshape(-1, 4).max(axis=1)
-
-        allowed = np.maximum(stray(before), tolerance[touched].min(axis=1))
-        far = stray(points) > allowed
-        back = np.intersect1d(touched[far], np.flatnonzero(moved))
-        if len(back) == 0:
-            break
-        points[back] = before[back]
-        moved[back] = False
-    return points
 
 
 def _positive(points, before, tets, moved) -> np.ndarray:
