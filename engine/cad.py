@@ -238,9 +238,8 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 source,
                 error.what,
             )
-    # BRepMesh's sagitta is at most DEFLECTION x the model size; Gmsh's 2-D mesh (36 per turn, sides up to the
-    # model size / MESHER_SIZE) strays 0.022 / MESHER_SIZE of it at most, less
-    geometry = dataclasses.replace(geometry, chord=DEFLECTION * float(np.linalg.norm(np.ptp(geometry.bounds, axis=0))))
+    # BRepMesh strays at most DEFLECTION x the model size from the CAD; Gmsh's 2-D mesh (the fallback) less
+    geometry = dataclasses.replace(geometry, chord=DEFLECTION * geometry.scale)
     if shared:
         face = np.searchsorted(faces, face_tag)
         kept = cad.kept(vertices, triangles, face, outer)
