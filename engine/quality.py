@@ -206,45 +206,53 @@ HAUSDORFF_SAMPLES_PER_TRIANGLE = 40
 HAUSDORFF_SAMPLES = (20_000, 200_000)
 
 
+def triangle_quality(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(t,) twice the inradius over the circumradius of each triangle (points (n, 3), triangles (t, 3)):
+    1 equilateral, 0 degenerate; pymeshlab's and Gmsh's "inradius/circumradius" triangle quality."""
+    corners = points[triangles]
+    a, b, c = (np.linalg.norm(corners[:, j] - corners[:, i], axis=1) for i, j in ((1, 2), (2, 0), (0, 1)))
+    s = (a + b + c) / 2
+    product = a * b * c
+    return np.divide(8 * (s - a) * (s - b) * (s - c), product, out=np.zeros_like(product), where=product > 0)
+
+
 def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
     """The boundary faces of the mesh's tetrahedra checked against the input surface: triangle quality
-    (inradius / circumradius, normalised, by pymeshlab), the Hausdorff distance both ways, absolute and over
-    the target size ``size(x)`` (:func:`surface_distances`, with ``samples`` points, by default
-    HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary triangle within HAUSDORFF_SAMPLES), topology (two-manifold,
-    boundary edges, components, holes, by pymeshlab) and area and volume against the input's."""
-    import pymeshlab
+    (:func:`triangle_quality`), the Hausdorff distance both ways, absolute and over the target size ``size(x)``
+    (:func:`surface_distances`, with ``samples`` points, by default HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary
+    triangle within HAUSDORFF_SAMPLES), topology (two-manifold at edges and vertices, boundary edges, edge-
+    connected components and boundary loops, by libigl) and area and volume against the input's (trimesh)."""
+    import igl
+    import trimesh
 
     boundary = mesh.boundary_faces()
     if samples is None:
         samples = int(np.clip(HAUSDORFF_SAMPLES_PER_TRIANGLE * len(boundary), *HAUSDORFF_SAMPLES))
     used, local = np.unique(boundary, return_inverse=True)
-    meshes = pymeshlab.MeshSet()
-    meshes.add_mesh(pymeshlab.Mesh(mesh.points[used], local.reshape(-1, 3)), "boundary")
-    meshes.add_mesh(pymeshlab.Mesh(np.asarray(geometry.mesh.vertices), np.asarray(geometry.mesh.faces)), "input")
-    meshes.set_current_mesh(0)
-    meshes.compute_scalar_by_aspect_ratio_per_face(metric=1)
-    triangle_quality = meshes.current_mesh().face_scalar_array()
-    topology = meshes.get_topological_measures()
-    measures = meshes.get_geometric_measures()
-    meshes.set_current_mesh(1)
-    reference = meshes.get_geometric_measures()
+    faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)
+    surface = trimesh.Trimesh(mesh.points[used], faces, process=False)
+    quality = triangle_quality(surface.vertices, faces)
+    edge_manifold, *_ = igl.is_edge_manifold(faces)
+    _, edge_uses = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0, return_counts=True)
+    open_edges = int((edge_uses == 1).sum())
+    components, _ = igl.facet_components(faces)
 
     distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples, geometry.chord)
     return {
         "triangles": int(len(boundary)),
         "triangle_quality": {
-            "min": float(triangle_quality.min()),
-            "median": float(np.median(triangle_quality)),
-            "below_0.3": int((triangle_quality < 0.3).sum()),
+            "min": float(quality.min()),
+            "median": float(np.median(quality)),
+            "below_0.3": int((quality < 0.3).sum()),
         },
         "hausdorff_input_to_mesh": distances["input_to_mesh"],
         "hausdorff_mesh_to_input": distances["mesh_to_input"],
-        "two_manifold": bool(topology["is_mesh_two_manifold"]),
-        "boundary_edges": int(topology["boundary_edges"]),
-        "components": int(topology["connected_components_number"]),
-        "holes": int(topology["number_holes"]) if topology.get("number_holes", -1) >= 0 else 0,
-        "area": float(measures["surface_area"]),
-        "input_area": float(reference["surface_area"]),
-        "volume": float(measures.get("mesh_volume", np.nan)),
-        "input_volume": float(reference.get("mesh_volume", np.nan)),
+        "two_manifold": bool(edge_manifold and igl.is_vertex_manifold(faces).all()),
+        "boundary_edges": open_edges,
+        "components": int(components),
+        "holes": len(igl.boundary_loop_all(faces)) if open_edges and edge_manifold else 0,
+        "area": float(surface.area),
+        "input_area": float(geometry.mesh.area),
+        "volume": float(surface.volume),
+        "input_volume": float(geometry.mesh.volume),
     }

@@ -3,11 +3,12 @@
 import itertools
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from engine.quality import tet_quality
+from engine.quality import boundary_report, tet_quality, triangle_quality
 
 REGULAR = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
 
@@ -89,3 +90,32 @@ def test_the_optimiser_aims_at_what_the_report_measures():
     aim = np.where(positive, np.minimum(q.radius_ratio, q.min_dihedral / REGULAR_DIHEDRAL), -1.0)
     for threshold in (0.05, 10 / REGULAR_DIHEDRAL, 0.2, 20 / REGULAR_DIHEDRAL, 0.5):
         assert np.array_equal(quality_below(points, tets, threshold), aim < threshold)
+
+
+def test_triangle_quality_is_twice_inradius_over_circumradius():
+    points = np.array([[0, 0, 0], [1, 0, 0], [0.5, math.sqrt(3) / 2, 0], [0, 1, 0], [2, 0, 0]], dtype=float)
+    q = triangle_quality(points, np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]]))
+    # right isosceles: r = (2 - sqrt 2) / 2, R = sqrt 2 / 2; three collinear points: 0
+    assert q == pytest.approx([1.0, 2 * (2 - math.sqrt(2)) / math.sqrt(2), 0.0])
+
+
+def test_boundary_report_topology_of_two_tets_touching_at_a_node():
+    """A closed boundary whose two shells share one node is not two-manifold there, though every edge is in
+    exactly two faces; one shell is."""
+    import trimesh
+
+    from engine.mesh import TetMesh
+
+    points = np.vstack([REGULAR, 2 * REGULAR[0] - REGULAR[1:]])  # the second tet: the first reflected through node 0
+    tets = np.array([[0, 2, 1, 3], [0, 4, 5, 6]])
+    tets[1] = tets[1] if tet_quality(points, tets[1:]).volume[0] > 0 else tets[1, [0, 2, 1, 3]]
+    level = np.zeros(len(points), np.int8)
+    for shells, manifold in ((tets, False), (tets[:1], True)):
+        mesh = TetMesh(points=points, tets=shells, node_level=level, node_entity=np.full(len(points), -1))
+        geometry = SimpleNamespace(mesh=trimesh.Trimesh(points, mesh.boundary_faces()), chord=0.0)
+        report = boundary_report(mesh, geometry, lambda x: np.ones(len(x)), samples=200)
+        assert report["two_manifold"] is manifold
+        assert report["boundary_edges"] == 0 and report["holes"] == 0
+        assert report["components"] == len(shells)
+        assert report["volume"] == pytest.approx(len(shells) * 8 / 3)
+        assert report["hausdorff_mesh_to_input"]["max"] == pytest.approx(0.0, abs=1e-9)
