@@ -180,7 +180,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 "CAD tool, or move them apart",
             )
         allow_multiple_solids = allow_multiple_solids or bool(shared)  # an assembly's solids are all bodies
-        volumes = [float(gm.occ.getMass(3, int(tag))) for tag in solids] if shared else []
+        solid_volumes = [float(gm.occ.getMass(3, int(tag))) for tag in solids]
         solid_names = _numbered(
             [_solid_name(gm.getEntityName(3, tag)) or f"solid-{k + 1}" for k, tag in enumerate(solids)]
         )
@@ -239,7 +239,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 error.what,
             )
     # BRepMesh strays at most DEFLECTION x the model size from the CAD; Gmsh's 2-D mesh (the fallback) less
-    geometry = dataclasses.replace(geometry, chord=DEFLECTION * geometry.scale)
+    geometry = dataclasses.replace(geometry, chord=DEFLECTION * geometry.scale, exact_volume=sum(solid_volumes))
     if shared:
         face = np.searchsorted(faces, face_tag)
         kept = cad.kept(vertices, triangles, face, outer)
@@ -263,7 +263,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                     for a, b in pairs
                 ],
                 frozenset(int(faces[k]) for k in shared),
-                volumes,
+                solid_volumes,
             ),
         )
     return geometry, features

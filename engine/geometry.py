@@ -38,6 +38,8 @@ class Geometry:
     notes: list[str] = field(default_factory=list)
     chord: float = 0.0  # how far the surface may lie from the true one it stands for (a CAD tessellation's
     # sagitta, engine/cad.py); 0 where the surface is the input itself (an STL)
+    exact_volume: float | None = None  # the solid's volume from its exact definition (a CAD file's, by
+    # OpenCASCADE; a built-in shape's formula); None where the surface is the definition (an STL)
 
     @property
     def bodies(self) -> int:

@@ -31,7 +31,7 @@ from .knowledge import KnowledgeBase, Placement, check_placement, load_knowledge
 from .mesh import TetMesh
 from .meshing import get_mesher
 from .packing import Packing, get_packer
-from .quadratic import QUADRATIC_FLOOR, scaled_jacobian
+from .quadratic import QUADRATIC_FLOOR, curved_volumes, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
 from .recombine import recombine
 from .report import report_summary, report_targets
@@ -346,6 +346,15 @@ def _mesh_assembly(job: Job, packer, mesher, geometry, features, sizing, kb, tim
     return packing, mesh
 
 
+def _volume_errors(volume: float, geometry: Geometry) -> str:
+    """A mesh's ``volume`` against the input surface's, and against the exact solid's where known (a CAD file, a
+    built-in shape)."""
+    errors = f"{100 * (volume / geometry.volume - 1):+.3f} % of the input's"
+    if geometry.exact_volume:
+        errors += f", {100 * (volume / geometry.exact_volume - 1):+.3f} % of the exact solid's"
+    return errors
+
+
 def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep_invalid: bool = False) -> Result:
     """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
     outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
@@ -417,8 +426,8 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
     there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
     log.info(
         "boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
-        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g%s; area %+.3f %%, volume %+.3f %% of the "
-        "input's; triangle quality min %.3f (%.2f s)",
+        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g%s; area %+.3f %% of the input's, volume "
+        "%s; triangle quality min %.3f (%.2f s)",
         boundary["triangles"],
         "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
         boundary["boundary_edges"],
@@ -431,7 +440,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         back["mean"],
         f" (x h: less the tessellation's sagitta {geometry.chord:.3g})" if geometry.chord else "",
         100 * (boundary["area"] / boundary["input_area"] - 1),
-        100 * (boundary["volume"] / boundary["input_volume"] - 1),
+        _volume_errors(boundary["volume"], geometry),
         boundary["triangle_quality"]["min"],
         timings["boundary"],
     )
@@ -492,6 +501,19 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
     )
     if mixed is not None and model is not None:
         model = _with_mixed(model, mixed)
+    jacobian = None
+    if job.output_order == 2:
+        jacobian = scaled_jacobian(model.points, model.tets)
+        quality["quadratic"] = {
+            "scaled_jacobian_min": float(jacobian.min()),
+            "volume": float(curved_volumes(model.points, model.tets).sum()),
+        }
+        log.info(
+            "10-node elements: scaled Jacobian min %.3f; volume %.6g, %s",
+            jacobian.min(),
+            quality["quadratic"]["volume"],
+            _volume_errors(quality["quadratic"]["volume"], geometry),
+        )
     with stage("acceptance", timings):
         try:
             check_mesh(
@@ -501,7 +523,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
                 elements,
                 boundary,
                 tolerances,
-                scaled_jacobian(model.points, model.tets) if job.output_order == 2 else None,
+                jacobian,
             )
             if mixed is not None:
                 quality["hex_dominant"]["boundary"] = check_mixed(mixed, mesh.volume, geometry, features, tolerances)

@@ -58,6 +58,12 @@ def jacobians(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
     return out
 
 
+def bernstein_jacobians(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
+    """(m, 20) Bernstein coefficients of det J (a cubic) of each 10-node tet: det J lies between their min and max,
+    and their mean is its mean over the element (every cubic Bernstein polynomial integrates to 1/20 of it)."""
+    return jacobians(points, tets10) @ TO_BERNSTEIN.T
+
+
 def scaled_jacobian(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
     """(m,) lower bound of min det J / det J of the straight-sided tet, per 10-node tet (``points`` (n, 3),
     ``tets10`` (m, 10)): the smallest Bernstein coefficient of det J over 6 x the corners' volume.
@@ -65,7 +71,13 @@ def scaled_jacobian(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
     1 for a straight-sided element, at most the value at any corner, and positive only if the element
     is valid everywhere (the corner tets must be positively oriented).
     """
-    coefficients = jacobians(points, tets10) @ TO_BERNSTEIN.T
+    coefficients = bernstein_jacobians(points, tets10)
     x = points[tets10[:, :4]]
     straight = np.einsum("mi,mi->m", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]))
     return coefficients.min(axis=1) / straight
+
+
+def curved_volumes(points: np.ndarray, tets10: np.ndarray) -> np.ndarray:
+    """(m,) exact volume of each 10-node tet, curved sides included: the integral of det J over the reference
+    tet (volume 1/6), the mean of its Bernstein coefficients / 6."""
+    return bernstein_jacobians(points, tets10).mean(axis=1) / 6

@@ -42,13 +42,31 @@ def report_summary(result) -> dict:
                 "tetrahedra": len(result.mesh.tets),
                 "boundary_triangles": len(result.mesh.boundary),
             },
-            "volume": {"mesh": result.mesh.volume, "solid": result.geometry.volume},
+            "volume": {
+                "mesh": result.mesh.volume,
+                "solid": result.geometry.volume,
+                "exact": result.geometry.exact_volume,
+                "ten_node": result.quality.get("quadratic", {}).get("volume"),
+            },
             "mesher": {k: v for k, v in result.mesh.stats.items()},
             "quality": result.quality,
             "size_conformity": result.conformity,
             "boundary": result.boundary,
         }
     )
+
+
+def _volumes(volume: dict) -> str:
+    """The mesh's volume against the input surface's and the exact solid's (when known), and the 10-node mesh's."""
+
+    def errors(v):
+        against = [(volume["solid"], "the input surface"), (volume.get("exact"), "the exact solid")]
+        return "; ".join(f"{100 * (v / ref - 1):+.3f} % of {name}'s" for ref, name in against if ref)
+
+    text = f"{volume['mesh']:.6g} ({errors(volume['mesh'])})"
+    if volume.get("ten_node"):
+        text += f"; 10-node elements {volume['ten_node']:.6g} ({errors(volume['ten_node'])})"
+    return text
 
 
 def write_report(directory: Path, name: str, cut: tuple[int, float] | None = None) -> list[Path]:
@@ -117,11 +135,7 @@ def render_html(
             "bubbles / nodes / tetrahedra",
             f"{summary['counts']['bubbles']:,} / {summary['counts']['nodes']:,} / {summary['counts']['tetrahedra']:,}",
         ),
-        (
-            "volume",
-            f"{summary['volume']['mesh']:.6g} "
-            f"({100 * (summary['volume']['mesh'] / summary['volume']['solid'] - 1):+.3f} % of the solid)",
-        ),
+        ("volume", _volumes(summary["volume"])),
         (
             "finest target size",
             f"h = {cells['h_target'][focus.element]:.4g} at ({', '.join(f'{x:.4g}' for x in focus.point)}), "

@@ -10,6 +10,7 @@ edges, such as a crack front inside a plate.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -131,11 +132,13 @@ def box_faces(lo, hi, prefix: str = "") -> list[NameRule]:
     return [NameRule(prefix + n, "patch", plane_patch(a, v, s, tol)) for n, a, v, s in names]
 
 
-def _geometry(solid: m3.Manifold, kind: str) -> Geometry:
+def _geometry(solid: m3.Manifold, kind: str, volume: float) -> Geometry:
+    """The faceted ``solid`` as a Geometry that knows the exact ``volume`` of the shape it stands for."""
     mesh = solid.to_mesh()
-    return validate_surface(
+    geometry = validate_surface(
         mesh.vert_properties[:, :3], mesh.tri_verts, f"shape '{kind}'", check_self_intersections=False
     )
+    return dataclasses.replace(geometry, exact_volume=float(volume))
 
 
 def _box(lx, ly, lz) -> m3.Manifold:
@@ -157,7 +160,7 @@ def cylinder(radius: float, height: float) -> Shape:
     return Shape(
         "cylinder",
         dict(radius=radius, height=height),
-        _geometry(solid, "cylinder"),
+        _geometry(solid, "cylinder", math.pi * radius**2 * height),
         rules,
         lengths=dict(radius=radius, height=height),
     )
@@ -178,7 +181,7 @@ def plate(length: float, width: float, thickness: float) -> Shape:
     return Shape(
         "plate",
         dict(length=length, width=width, thickness=thickness),
-        _geometry(solid, "plate"),
+        _geometry(solid, "plate", length * width * thickness),
         box_faces(lo, hi),
         lengths=dict(thickness=thickness),
     )
@@ -215,7 +218,7 @@ def plate_with_hole(
     return Shape(
         "plate_with_hole",
         dict(length=length, width=width, thickness=thickness, hole_radius=hole_radius, hole_x=hole_x, hole_y=hole_y),
-        _geometry(solid, "plate_with_hole"),
+        _geometry(solid, "plate_with_hole", (length * width - math.pi * hole_radius**2) * thickness),
         rules,
         lengths=dict(thickness=thickness, hole_radius=hole_radius, width=width),
     )
@@ -265,7 +268,7 @@ def plate_cylinder_junction(
     return Shape(
         "plate_cylinder_junction",
         params,
-        _geometry(solid, "plate_cylinder_junction"),
+        _geometry(solid, "plate_cylinder_junction", length * width * thickness + math.pi * radius**2 * height),
         rules,
         lengths=dict(thickness=thickness, radius=radius, edge_gap=gap),
     )
@@ -320,7 +323,7 @@ def l_bracket(leg_length: float, leg_height: float, thickness: float, width: flo
     return Shape(
         "l_bracket",
         params,
-        _geometry(solid, "l_bracket"),
+        _geometry(solid, "l_bracket", (leg_length * t + (leg_height - t) * t + (1 - math.pi / 4) * r**2) * width),
         rules,
         lengths=dict(thickness=t, fillet_radius=r),
         face_groups=groups,
@@ -376,7 +379,7 @@ def cracked_plate(
     return Shape(
         "cracked_plate",
         params,
-        _geometry(_box(length, width, thickness), "cracked_plate"),
+        _geometry(_box(length, width, thickness), "cracked_plate", length * width * thickness),
         box_faces(lo, hi),
         [GivenCurve("crack-front", front)],
         lengths=dict(thickness=thickness, crack_length=crack_length),
@@ -438,7 +441,7 @@ def hollow_sphere_octant(inner_radius: float, outer_radius: float) -> Shape:
     return Shape(
         "hollow_sphere_octant",
         dict(inner_radius=a, outer_radius=b),
-        _geometry(solid, "hollow_sphere_octant"),
+        _geometry(solid, "hollow_sphere_octant", math.pi / 6 * (b**3 - a**3)),
         rules,
         lengths=dict(inner_radius=a, outer_radius=b, thickness=b - a),
     )
