@@ -74,6 +74,7 @@ SCALED = {
     "hole": {"near": 1, "far": 1},
     "thin-wall": {"through": -1},
     "narrow-gap": {"across": -1},
+    "narrow-face": {"stretch": 1},
     "curvature": {"per_circle": -1, "volume_change": 2},
 }
 
@@ -522,16 +523,15 @@ def markdown(study: dict) -> str:
         cells = [_count(per[s]["at_1_mean"]) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         cells += [_count(per[s]["at_3_mean"]) if s in per else "-" for s in ("recipe", "uniform", "gmsh")]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    refused = "; ".join(
+        f"{name}: " + ", ".join(f"{s} {d['rejected']} of {d['meshes']}" for s, d in per.items() if d["rejected"])
+        for name, per in summary.items()
+        if any(d["rejected"] for d in per.values())
+    )
     lines += [
         "",
         "Meshes refused by fuzzymesh's acceptance gate (min dihedral 5 deg, Hausdorff) and so missing "
-        "from the series: "
-        + "; ".join(
-            f"{name}: " + ", ".join(f"{s} {d['rejected']} of {d['meshes']}" for s, d in per.items() if d["rejected"])
-            for name, per in summary.items()
-            if any(d["rejected"] for d in per.values())
-        )
-        + ".",
+        f"from the series: {refused or 'none'}.",
     ]
     lines += [
         "",
