@@ -42,8 +42,7 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
     zone_offset = np.cumsum([0] + [len(p.zones) for p in sizing.placed])
     placements = list(dict.fromkeys(id(p.placement) for p in sizing.placed))
     placement_of = np.array([placements.index(id(p.placement)) for p in sizing.placed] + [-1])
-    edge = corners[:, EDGES[:, 1]] - corners[:, EDGES[:, 0]]
-    h_actual = np.sqrt(np.einsum("ijk,ijk->ij", edge, edge)).mean(axis=1)
+    h_actual = sum(np.linalg.norm(corners[:, j] - corners[:, i], axis=1) for i, j in EDGES) / len(EDGES)
     cells = {
         "h_target": evaluation.h,
         "h_actual": h_actual,

@@ -8,6 +8,7 @@ from functools import cached_property
 import numpy as np
 
 FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k is opposite vertex k, outward
+RANKED_FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # face k opposite vertex k, ascending
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -18,18 +19,26 @@ def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner (t,), side (t,)) of the faces of ``tets`` (m, 4) used by one tetrahedron only, in tet order:
-    they are ``tets[owner, FACES[side]]``, outward for positively oriented tets. The sorted faces' integer
-    keys are sorted (940k tets: 1 s, where np.unique(axis=0) took 10 s)."""
-    faces = np.sort(tets[:, FACES].reshape(-1, 3), axis=1)
+    they are ``tets[owner, FACES[side]]``, outward for positively oriented tets. Each tet's nodes are ranked
+    once, so its faces come out ascending, and the faces' integer keys are sorted (1.35M tets: 0.89 s, where
+    sorting every face's nodes took 1.97 s and np.unique(axis=0) 10x that)."""
+    rank = np.argsort(tets, axis=1)
+    ranked = np.take_along_axis(tets, rank, axis=1)
+    faces = ranked[:, RANKED_FACES].reshape(-1, 3)  # face k of a ranked tet: opposite its k-th smallest node
     n = int(tets.max(initial=0)) + 1
-    first_two = faces[:, 0] * n + faces[:, 1]
     if n < 2**21:  # one int64 key per face sorts fastest (n^3 < 2^63)
-        order = np.argsort(first_two * n + faces[:, 2])
+        keys = (faces[:, 0] * n + faces[:, 1]) * n + faces[:, 2]
+        order = np.argsort(keys)
+        keys = keys[order]
+        start = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
     else:
-        order = np.lexsort((faces[:, 2], first_two))
-    start = np.flatnonzero(np.r_[True, (np.diff(faces[order], axis=0) != 0).any(axis=1)])
-    single = np.sort(order[start[np.diff(np.r_[start, len(faces)]) == 1]])
-    return single // 4, single % 4
+        order = np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))
+        start = np.flatnonzero(np.r_[True, (np.diff(faces[order], axis=0) != 0).any(axis=1)])
+    once = order[start[np.diff(np.r_[start, len(faces)]) == 1]]
+    owner = once // 4
+    side = rank[owner, once % 4]  # the ranked vertex a face is opposite, back in the tet's own order
+    by_tet = np.argsort(owner * 4 + side)
+    return owner[by_tet], side[by_tet]
 
 
 @dataclass(frozen=True, kw_only=True)
