@@ -7,6 +7,8 @@ from functools import cached_property
 
 import numpy as np
 
+from ._numba import numba
+
 FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k is opposite vertex k, outward
 RANKED_FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # face k opposite vertex k, ascending
 
@@ -39,6 +41,43 @@ def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     side = rank[owner, once % 4]  # the ranked vertex a face is opposite, back in the tet's own order
     by_tet = np.argsort(owner * 4 + side)
     return owner[by_tet], side[by_tet]
+
+
+@numba.njit(cache=True)
+def unique_pairs(first, second, value, n):
+    """The distinct pairs of (first (k,), second (k,)), both in [0, n), each with the smallest ``value`` (k,)
+    among its copies: (first, second, value) of the distinct pairs, grouped by first (ascending), in order of
+    first appearance within a group. A counting sort by ``first`` and a last-seen mark per ``second``: O(k + n),
+    where sorting one int64 key per pair took 3x as long (11M pairs, 275k nodes: 1.8 s against 0.54 s with
+    edges of tets whose nodes are sorted)."""
+    start = np.zeros(n + 1, np.int64)
+    for i in range(len(first)):
+        start[first[i] + 1] += 1
+    for a in range(n):
+        start[a + 1] += start[a]
+    fill = start[:-1].copy()
+    by_first = np.empty(len(first), np.int64)
+    for i in range(len(first)):
+        by_first[fill[first[i]]] = i
+        fill[first[i]] += 1
+    seen = np.full(n, -1, np.int64)
+    slot = np.empty(n, np.int64)
+    out_first = np.empty(len(first), np.int64)
+    out_second = np.empty(len(first), np.int64)
+    out_value = np.empty(len(first), value.dtype)
+    k = 0
+    for a in range(n):
+        for j in range(start[a], start[a + 1]):
+            i = by_first[j]
+            b = second[i]
+            if seen[b] != a:
+                seen[b] = a
+                slot[b] = k
+                out_first[k], out_second[k], out_value[k] = a, b, value[i]
+                k += 1
+            elif value[i] < out_value[slot[b]]:
+                out_value[slot[b]] = value[i]
+    return out_first[:k], out_second[:k], out_value[:k]
 
 
 @dataclass(frozen=True, kw_only=True)

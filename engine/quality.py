@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._numba import numba
+from .mesh import unique_pairs
 from .tetmetrics import all_metrics
 
 EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
@@ -163,18 +164,11 @@ def size_conformity(mesh, sizing, winner: np.ndarray | None = None) -> dict:
     tetrahedron (engine.audit; -1 none), an edge counted under the smallest winner of the tetrahedra holding
     it; without it (another mesher's mesh) the sizing field's audited evaluation at the midpoints (a second
     pass over every pattern)."""
-    n = len(mesh.points)
-    pairs = np.sort(mesh.tets[:, EDGES].reshape(-1, 2), axis=1).astype(np.int64)
-    keys = pairs[:, 0] * n + pairs[:, 1]  # one int64 per edge: sorting beats np.unique's hash
-    if winner is not None:  # the winner rides in the key's low digits: one sort, no argsort
-        span = int(winner.max(initial=-1)) + 2
-        keys = keys * span + np.repeat(winner.astype(np.int64) + 1, len(EDGES))
-    else:
-        span = 1
-    keys = np.sort(keys)
-    keys = keys[np.r_[True, keys[1:] // span != keys[:-1] // span]]
-    edge, edge_winner = keys // span, keys % span - 1
-    a, b = mesh.points[edge // n], mesh.points[edge % n]
+    ranked = np.sort(mesh.tets, axis=1).astype(np.int64)  # each tet's nodes ascending, so are its edges'
+    first, second = ranked[:, EDGES[:, 0]].ravel(), ranked[:, EDGES[:, 1]].ravel()
+    held_by = np.repeat(winner if winner is not None else np.zeros(len(ranked), np.int64), len(EDGES))
+    first, second, edge_winner = unique_pairs(first, second, held_by.astype(np.int64), len(mesh.points))
+    a, b = mesh.points[first], mesh.points[second]
     if winner is None:
         evaluation = sizing.evaluate((a + b) / 2)
         h, edge_winner = evaluation.h, evaluation.winner
