@@ -29,6 +29,7 @@ import numpy as np
 from .errors import MeshRejected
 from .quadratic import QUADRATIC_FLOOR
 
+CUSP_ANGLE = 10.0  # degrees: two feature curves that leave a corner closer than this make a cusp
 KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invalid.* for inspection"
 
 
@@ -158,13 +159,20 @@ def check_mesh(
     worst = int(np.argmin(quality.min_dihedral))
     if not quality.min_dihedral[worst] >= tolerances.min_dihedral:
         below = int((quality.min_dihedral < tolerances.min_dihedral).sum())
+        cusp = cusp_near(mesh.points[tets[worst]], features)
         raise MeshRejected(
             f"{below} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the "
             f"smallest {quality.min_dihedral[worst]:.3g} deg at "
-            f"{where(mesh.points[tets[worst]].mean(axis=0))}",
+            f"{where(mesh.points[tets[worst]].mean(axis=0))}{cusp}",
             check="minimum dihedral angle",
-            fix="mesh again with another seed or a size that resolves the feature there, or lower "
-            f"acceptance.min_dihedral in the sizing defaults; {KEEP_INVALID}",
+            fix=(
+                "remove the cusp in the model (let the face end on an edge at an angle, or cut the sliver off), "
+                "or accept flatter elements there with a lower acceptance.min_dihedral in a knowledge file"
+                if cusp
+                else "mesh again with another seed or a size that resolves the feature there, or lower "
+                "acceptance.min_dihedral in the sizing defaults"
+            )
+            + f"; {KEEP_INVALID}",
         )
     if quadratic_jacobian is not None and len(quadratic_jacobian):
         worst = int(np.argmin(quadratic_jacobian))
@@ -202,6 +210,31 @@ def interface_sides(tets: np.ndarray, body: np.ndarray, triangles: np.ndarray) -
     np.minimum.at(low, face_key, body[owner])
     np.maximum.at(high, face_key, body[owner])
     return count[triangle_key], (high > low)[triangle_key]
+
+
+def cusp_near(corners: np.ndarray, features) -> str:
+    """A clause naming the cusp next to a tetrahedron (``corners`` (4, 3)): the corner, within 3 of the tet's
+    longest edges, that two feature curves leave less than CUSP_ANGLE apart; '' if there is none. There the
+    face between the curves is narrower than the elements for several element sizes, and flat elements are
+    forced (the cause of most minimum-angle rejections of real parts, where Gmsh gives 1-2 deg)."""
+    from .features import coordinates, leaving_angles
+
+    curve, end, other, _, angle = leaving_angles(features)
+    cusp = np.flatnonzero(angle < CUSP_ANGLE)
+    if len(cusp) == 0:
+        return ""
+    at = np.array([features.curves[c].points[0 if e == 0 else -1] for c, e in zip(curve[cusp], end[cusp])])
+    distance = np.linalg.norm(at - corners.mean(axis=0), axis=1)
+    nearest = int(np.argmin(distance))
+    if distance[nearest] > 3 * np.linalg.norm(corners[:, None] - corners[None], axis=2).max():
+        return ""
+    k = cusp[nearest]
+    scale = float(np.abs(corners).max())
+    return (
+        f", next to a cusp: {features.curves[curve[k]].id} and {features.curves[other[k]].id} leave the corner at "
+        f"({coordinates(at[nearest], scale)}) {angle[k]:.2g} deg apart, and the face between them is narrower "
+        "than the elements there"
+    )
 
 
 def _locate(point: np.ndarray, geometry, features) -> str:

@@ -197,6 +197,24 @@ def curves_meeting(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return first // 2, first % 2, second // 2, second % 2
 
 
+def leaving_angles(features: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`curves_meeting`'s pairs of curve ends at one corner, (curve, end, other curve, its end), with (k,)
+    the angle in degrees between the directions in which the two curves leave the corner (their first
+    segments): under a few degrees, a cusp."""
+    curve, end, other, other_end = curves_meeting(features)
+    leaving = np.array([first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
+    leaving_too = np.array([first_segment(features.curves[c], e) for c, e in zip(other, other_end)]).reshape(-1, 3)
+    angle = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", leaving, leaving_too), -1.0, 1.0)))
+    return curve, end, other, other_end, angle
+
+
+def first_segment(curve, end: int) -> np.ndarray:
+    """The unit direction in which ``curve`` leaves its start (``end`` 0) or its end (1)."""
+    points = curve.points
+    step = points[1] - points[0] if end == 0 else points[-2] - points[-1]
+    return step / (np.linalg.norm(step) or 1.0)
+
+
 def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=()) -> Features:
     """Find corners, feature curves and patches of ``geometry`` (angles in degrees).
 

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import dataclasses
 import textwrap
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from engine.acceptance import Tolerances, boundary_topology
+from engine.acceptance import Tolerances, boundary_topology, cusp_near
 from engine.cli import main
 from engine.errors import MeshRejected
 from engine.job import load_job
@@ -206,3 +207,22 @@ def test_population_rules_that_delete_every_bubble_give_no_mesh(capsys, tmp_path
     assert code == 4 and err.startswith("fuzzymesh: error: mesh rejected ("), err
     assert "(meshing)" not in err or "population rules" in err, "a meshing failure names the rules to check"
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_rejection_next_to_a_cusp_names_it():
+    """Two curves leaving a corner 2.9 deg apart are a cusp: a tet within three of its edges of that corner is
+    said to be next to it, one farther away or at a 90 deg corner is not."""
+
+    def curve(name, end):
+        return SimpleNamespace(id=name, points=np.array([[0.0, 0.0, 0.0], end]))
+
+    features = SimpleNamespace(
+        corners=[SimpleNamespace(point=np.zeros(3))],
+        curves=[curve("wall-edge", [10.0, 0.0, 0.0]), curve("round-edge", [10.0, 0.5, 0.0])],
+    )
+    tet = np.array([[1.0, 0.0, 0.0], [1.5, 0.1, 0.0], [1.2, 0.0, 0.4], [1.3, 0.3, 0.2]])
+    clause = cusp_near(tet, features)
+    assert "wall-edge and round-edge leave the corner at (0, 0, 0) 2.9 deg apart" in clause
+    assert cusp_near(tet + [5.0, 0.0, 0.0], features) == ""
+    features.curves[1] = curve("round-edge", [0.0, 10.0, 0.0])
+    assert cusp_near(tet, features) == ""

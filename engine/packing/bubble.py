@@ -34,7 +34,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ..errors import KnowledgeError
-from ..features import curves_meeting
+from ..features import leaving_angles
 from ..progress import progress
 from ..sizing import NODES_PER_H3
 from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
@@ -368,13 +368,10 @@ def _touching_curves(features) -> sparse.csr_matrix:
 
 
 def _leaving_together(features):
-    """:func:`engine.features.curves_meeting`'s pairs of curve ends at one corner, and (k,) whether the two
+    """:func:`engine.features.leaving_angles`'s pairs of curve ends at one corner, and (k,) whether the two
     curves leave the corner closer than LEAVING_TOGETHER between their first segments."""
-    curve, end, other, other_end = curves_meeting(features)
-    leaving = np.array([_first_segment(features.curves[c], e) for c, e in zip(curve, end)]).reshape(-1, 3)
-    leaving_too = np.array([_first_segment(features.curves[c], e) for c, e in zip(other, other_end)]).reshape(-1, 3)
-    together = np.einsum("ij,ij->i", leaving, leaving_too) >= np.cos(np.radians(LEAVING_TOGETHER))
-    return curve, end, other, other_end, together
+    curve, end, other, other_end, angle = leaving_angles(features)
+    return curve, end, other, other_end, angle <= LEAVING_TOGETHER
 
 
 def _shells_at_acute_corners(points, entity, features) -> np.ndarray:
@@ -415,13 +412,6 @@ def _first_along(points, entity, curve, key: int, end: int):
     order = np.argsort(distance)
     after = distance[order[1]] if len(rows) > 1 else np.inf
     return rows[order[0]], distance[order[0]], after
-
-
-def _first_segment(curve, end: int) -> np.ndarray:
-    """The unit direction in which ``curve`` leaves its start (``end`` 0) or its end (1)."""
-    points = curve.points
-    step = points[1] - points[0] if end == 0 else points[-2] - points[-1]
-    return step / (np.linalg.norm(step) or 1.0)
 
 
 def _control(state: LevelState, step: int, neighbours: np.ndarray):
