@@ -44,6 +44,7 @@ RETRY_TURN = 15.0  # BRepMesh tried again at this turn (its folds depend on it) 
 DEFLECTION = 1e-3  # tessellation: largest sagitta, x the model size
 MESHER_SIZE = 40  # Gmsh's 2-D mesh, where OpenCASCADE's tessellation fails: longest side = model size / this
 HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are sewn across gaps this wide
+SLIVER = 1e-5  # x the model size: a face narrower than this on average is an artefact the model is healed of
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
@@ -368,15 +369,41 @@ def _build(path: str) -> None:
         ) from None
     finally:
         gmsh.option.setString("Geometry.OCCTargetUnit", previous)
+    occ.synchronize()
+    lo, hi = np.reshape(gmsh.model.getBoundingBox(-1, -1), (2, 3))
+    size = float(np.linalg.norm(hi - lo))
     if not any(dim == 3 for dim, _ in shapes):  # all entities: given the imported faces, OpenCASCADE makes no solid
-        occ.synchronize()
-        lo, hi = np.reshape(gmsh.model.getBoundingBox(-1, -1), (2, 3))
-        occ.healShapes(tolerance=HEAL_TOLERANCE * float(np.linalg.norm(hi - lo)))
+        occ.healShapes(tolerance=HEAL_TOLERANCE * size)
+    elif (narrowest := _narrowest_face(gmsh)) < SLIVER * size:
+        # a zero-width face along an edge (an exporter's artefact): its two edges are feature curves a few
+        # micrometres apart, and OpenCASCADE's tessellation of the solid is not closed there
+        faces = len(occ.getEntities(2))
+        occ.healShapes(tolerance=SLIVER * size)
+        log.info(
+            "%s: a face %.2g wide (%.2g of the model size) removed by OpenCASCADE's healing: %d faces -> %d",
+            path,
+            narrowest,
+            narrowest / size,
+            faces,
+            len(occ.getEntities(2)),
+        )
     solids = occ.getEntities(3)
     if len(solids) > 1:
         occ.synchronize()  # the model takes the file's names now: a fragment before that blanks some of them
         occ.fragment(solids, [])
     occ.synchronize()
+
+
+def _narrowest_face(gmsh) -> float:
+    """The smallest mean width (area over half the perimeter) of the current model's faces; inf for none."""
+    occ = gmsh.model.occ
+    widths = [np.inf]
+    for _, face in occ.getEntities(2):
+        edges = {abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], combined=False, oriented=False)}
+        perimeter = sum(occ.getMass(1, edge) for edge in edges)
+        if perimeter > 0:
+            widths.append(2 * occ.getMass(2, face) / perimeter)
+    return float(min(widths))
 
 
 def _solid_name(name: str) -> str:

@@ -87,6 +87,12 @@ def faces_only():
     occ.remove(occ.getEntities(3))
 
 
+def sliver_step():
+    """Two 10 mm boxes side by side, the second 1e-6 taller: their top faces meet through a face 1e-6 wide
+    (as exporters leave between two faces that should have been one)."""
+    occ.fuse([(3, occ.addBox(0, 0, 0, 10, 10, 10))], [(3, occ.addBox(10, 0, 0, 10, 10, 10 + 1e-6))])
+
+
 def apart():
     """Two boxes 10 apart, one with a hole."""
     occ.addBox(0, 0, 0, 40, 30, 20)
@@ -101,6 +107,7 @@ PARTS = {
     "cylinder_on_plate": cylinder_on_plate,
     "pin_in_plate": pin_in_plate,
     "apart": apart,
+    "sliver_step": sliver_step,
     "split_hole": split_hole,
     "faces_only": faces_only,
     "lofted_handle": make_parts.lofted_handle,
@@ -412,3 +419,13 @@ def test_the_gate_does_not_charge_a_cad_mesh_with_the_tessellation_s_chords(step
     assert plain["mesh_to_input"]["max_over_h"] > 7
     allowed = surface_distances(mesh.vertices, mesh.faces, tessellation, tiny, 5000, chord=sagitta)
     assert allowed["mesh_to_input"]["max_over_h"] < 0.01 and allowed["input_to_mesh"]["max_over_h"] < 0.01
+
+
+def test_a_face_a_micrometre_wide_is_healed_away(step_files, tmp_path):
+    """The model is healed of a face narrower than SLIVER x its size: its two edges, 1e-6 apart, made 1,231 tets
+    under 5 deg (the gate refused the mesh); an outside test's bracket had two such faces."""
+    path, volume = step_files["sliver_step"]
+    _, geometry, features = solid_features(path)
+    assert len(features.patches) == 7 and geometry.exact_volume == pytest.approx(volume, rel=1e-6)
+    result = run(_job(path, tmp_path, size=2.0))
+    assert result.quality["min_dihedral"]["min"] > 15
