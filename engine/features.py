@@ -24,6 +24,9 @@ from .geometry import Geometry
 
 CIRCLE_TOLERANCE = 2e-3  # max radial deviation / radius for a curve to count as a circle
 TILTED_NORMALS = 0.1  # a cylinder's facet normals: third singular value / first (Gmsh's STLs: 1.3e-2 to 4.7e-2)
+FLAT = 1e-7  # x the model size: a patch whose vertices all lie this near its mean plane is a plane (a CAD
+# tessellation's plane faces: 1e-9 to 1e-8, the coordinates' precision; at 1e-9 an outside test's bracket's
+# sides were "cylinders" of radius 1.8e8 and so concave fillets)
 
 
 @dataclass(frozen=True)
@@ -620,7 +623,7 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
         centroid = (centres[faces] * areas[faces, None]).sum(axis=0) / max(area, 1e-300)
         verts = mesh.vertices[np.unique(mesh.faces[faces])]
         planar = bool(
-            np.abs((verts - centroid) @ normal).max() <= 1e-9 * geometry.scale
+            np.abs((verts - centroid) @ normal).max() <= FLAT * geometry.scale
             and np.all(normals[faces] @ normal > 1 - 1e-9)
         )
         cylinder = None if planar else fit_cylinder(centres[faces], normals[faces], verts)

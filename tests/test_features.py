@@ -109,3 +109,19 @@ def test_a_hole_whose_facets_cross_the_cylinder_lines_is_a_hole(tmp_path):
     assert len(holes) == 1
     assert holes[0].cylinder.radius == pytest.approx(8, rel=1e-3)
     assert abs(holes[0].cylinder.axis @ [0, 0, 1]) == pytest.approx(1, abs=1e-6)
+
+
+def test_a_plane_written_to_a_few_nanometres_is_a_plane():
+    """A CAD tessellation's plane faces lie on their plane only to the coordinates' precision (1e-9 to 1e-8 of
+    the model size): at 1e-9 an outside test's bracket's sides were cylinders of radius 1.8e8, so concave, so
+    'fillet'. Every face of a subdivided box with its vertices moved 5e-9 x the model size off is planar."""
+    import trimesh
+
+    from engine.geometry import validate_surface
+
+    box = trimesh.creation.box([40.0, 30.0, 20.0]).subdivide().subdivide()
+    size = float(np.linalg.norm(box.extents))
+    noise = np.random.default_rng(0).uniform(-5e-9, 5e-9, box.vertices.shape) * size
+    features = detect_features(validate_surface(box.vertices + noise, box.faces, "<noisy box>"))
+    assert len(features.patches) == 6
+    assert all(p.planar and p.cylinder is None for p in features.patches)
