@@ -4,8 +4,8 @@ Run after meshing, the same for every packer and mesher (built-in or plug-in). T
 
 1. every tetrahedron has a positive volume;
 2. the tets' own boundary faces form a closed two-manifold (every edge in exactly two faces, with
-   opposite orientations); the mesher's declared boundary triangles only name patches
-   (:func:`engine.fe.tet_boundary`);
+   opposite orientations, and the faces round every node one fan); the mesher's declared boundary
+   triangles only name patches (:func:`engine.fe.tet_boundary`);
 3. an assembly's (touching solids of a CAD file, engine/assembly.py): every interface triangle is a face of
    exactly two tets, of different bodies (the interface conforms, its nodes are merged);
 4. the mesh volume is within ``volume`` (a fraction) of the input solid's, and each body of an assembly
@@ -46,9 +46,12 @@ class Tolerances:
 
 def boundary_topology(tets: np.ndarray, sides: tuple | None = None) -> dict:
     """Topology of the tets' boundary faces (faces of one tet only; ``sides`` their (owner, side) when known,
-    :func:`engine.mesh.single_faces`): counts of edges not in exactly two faces (``open_edges``) and of edges
-    whose two faces run the same way (``misoriented``); ``faces`` the (b, 3) outward boundary faces;
-    ``bad_node`` a node on a defect or -1."""
+    :func:`engine.mesh.single_faces`): counts of edges not in exactly two faces (``open_edges``), of edges
+    whose two faces run the same way (``misoriented``) and of nodes whose faces are not one fan (``pinched``:
+    two sheets of the boundary touch there, as where two tets meet at a node only); ``faces`` the (b, 3)
+    outward boundary faces; ``bad_node`` a node on a defect or -1."""
+    import igl
+
     from .mesh import FACES, single_faces
 
     owner, side = single_faces(tets) if sides is None else sides
@@ -58,11 +61,14 @@ def boundary_topology(tets: np.ndarray, sides: tuple | None = None) -> dict:
     open_edges = undirected[edge_counts != 2]
     same_way, way_counts = np.unique(directed, axis=0, return_counts=True)
     misoriented = same_way[way_counts > 1]
-    bad = open_edges[:1, 0] if len(open_edges) else misoriented[:1, 0] if len(misoriented) else []
+    used = np.unique(boundary)
+    pinched = used[~igl.is_vertex_manifold(np.ascontiguousarray(boundary, dtype=np.int64))[used]]
+    bad = next((d[:1].ravel() for d in (open_edges, misoriented, pinched) if len(d)), [])
     return {
         "faces": boundary,
         "open_edges": int(len(open_edges)),
         "misoriented": int(len(misoriented)),
+        "pinched": int(len(pinched)),
         "bad_node": int(bad[0]) if len(bad) else -1,
     }
 
@@ -93,11 +99,13 @@ def check_mesh(
             fix=f"mesh again with another seed and report the input; {KEEP_INVALID}",
         )
     topology = boundary_topology(tets, mesh.boundary_sides())
-    if topology["open_edges"] or topology["misoriented"]:
+    if topology["open_edges"] or topology["misoriented"] or topology["pinched"]:
         what = (
             f"{topology['open_edges']} boundary edges not shared by exactly two faces"
             if topology["open_edges"]
             else f"{topology['misoriented']} boundary edges with inconsistently oriented faces"
+            if topology["misoriented"]
+            else f"{topology['pinched']} boundary nodes where two sheets of the boundary touch at a point"
         )
         raise MeshRejected(
             f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[topology['bad_node']])}",

@@ -66,6 +66,12 @@ def test_boundary_topology_finds_open_and_misoriented_edges():
     # a tet and its mirror image glued on face 1-2-3, the mirror inverted: their outer faces disagree
     flipped = np.array([[0, 1, 2, 3], [4, 1, 2, 3]])
     assert boundary_topology(flipped)["misoriented"] > 0
+    # two tets sharing only node 0: every edge is in two faces, but the faces round node 0 are two fans
+    pinch = np.array([[0, 1, 2, 3], [0, 4, 5, 6]])
+    topology = boundary_topology(pinch)
+    assert topology["open_edges"] == topology["misoriented"] == 0
+    assert topology["pinched"] == 1 and topology["bad_node"] == 0
+    assert boundary_topology(tet)["pinched"] == 0 and boundary_topology(flipped)["pinched"] == 0
 
 
 def test_a_non_manifold_mesh_is_refused_with_no_files_and_kept_on_request(capsys, tmp_path):
