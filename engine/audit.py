@@ -129,9 +129,12 @@ def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_sou
     return Audit(cells, nodes, legend)
 
 
-def idle_patterns(legend: dict) -> list[str]:
-    """One warning per placed pattern that wins no element, saying whether it reaches any."""
-    return [
+def idle_patterns(legend: dict) -> tuple[list[str], list[str]]:
+    """The placed patterns that win no element: (one warning per pattern the job itself placed, saying whether it
+    reaches any: the user wrote it, and it does nothing; the ids of the others, placed by the base pattern, a
+    recipe or the sizing defaults on every feature they may apply to, where a finer pattern often wins)."""
+    idle = [p for p in legend["patterns"] if p["elements"] == 0]
+    warnings = [
         f"placed pattern '{p['id']}' (pattern '{p['pattern']}', placed by {p['origin']} at {p['placement']}) "
         "wins no element: "
         + (
@@ -141,9 +144,10 @@ def idle_patterns(legend: dict) -> list[str]:
             else "its membership is 0 at every element"
         )
         + "; check its placement, parameters and zones with 'fuzzymesh explain JOB --at X Y Z' near it"
-        for p in legend["patterns"]
-        if p["elements"] == 0
+        for p in idle
+        if p["origin"] == "job"
     ]
+    return warnings, [p["id"] for p in idle if p["origin"] != "job"]
 
 
 def _node_history(mesh: TetMesh, packing, knowledge):

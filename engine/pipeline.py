@@ -470,9 +470,16 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         ", ".join(f"{name} {100 * s['within']:.1f} %" for name, s in conformity["by_pattern"].items() if s["edges"]),
         timings["conformity"],
     )
-    warnings = idle_patterns(audit.legend)
+    warnings, outdone = idle_patterns(audit.legend)
     for warning in warnings:
         log.warning(warning)
+    if outdone:
+        log.info(
+            "placed by the base pattern, a recipe or the sizing defaults, %d patterns win no element (another asks "
+            "for smaller ones wherever they reach): %s",
+            len(outdone),
+            ", ".join(outdone),
+        )
     result = Result(
         job=job,
         geometry=geometry,

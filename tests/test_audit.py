@@ -117,13 +117,15 @@ def test_a_placed_pattern_that_wins_no_element_is_a_warning_in_the_log_and_the_r
     with caplog.at_level(logging.WARNING):
         result = run(load_job(job))
     won = np.bincount(result.audit.cells["winner"] + 1, minlength=len(result.sizing.placed) + 1)[1:]
-    idle = {p.id for p, n in zip(result.sizing.placed, won) if n == 0}
-    assert {"coarse", "far-away"} <= idle and "base" not in idle
+    idle = {p.id for p, n in zip(result.sizing.placed, won) if n == 0 and p.placement.origin == "job"}
+    assert idle == {"coarse", "far-away"}
     logged = [
         m for m in (r.getMessage() for r in caplog.records if r.levelno == logging.WARNING) if "wins no element" in m
     ]
     report = json.loads((tmp_path / "out" / "mesh.report.json").read_text())
+    # the job's own placements only: the sizing defaults' (thin-wall, curvature, ...) are placed on every feature
     assert report["warnings"] == logged == result.warnings and len(logged) == len(idle)
+    assert all("placed by job" in warning for warning in logged)
     coarse = next(w for w in logged if "'coarse'" in w)
     far = next(w for w in logged if "'far-away'" in w)
     assert f"{job}:" in coarse and "membership is > 0 at" in coarse and "higher" in coarse
