@@ -87,9 +87,39 @@ def check_element_limit(sizing, max_elements: float | None = None) -> float:
     _, tets = sizing.expected_counts
     limit, why = (max_elements, "") if max_elements is not None else default_element_limit()
     if not math.isfinite(tets) or tets > limit:
+        placed, share = densest_pattern(sizing)
+        where = (
+            f"; {100 * share:.0f} % of them lie where '{placed.id}' (pattern '{placed.placement.pattern}', placed by "
+            f"{placed.placement.origin}) sets the size"
+            if placed is not None
+            else ""
+        )
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {limit:.3g}{': ' + why if why else ''}); "
-            f"the smallest size is {sizing.h_min:.4g}",
-            fix="use larger sizes, or raise the limit with --max-elements",
+            f"the smallest size is {sizing.h_min:.4g}{where}",
+            fix=(
+                f"place '{placed.placement.pattern}' in the job with coarser parameters (a job's placement of a "
+                "pattern replaces the recipe's and the sizing defaults'), use larger sizes, "
+                if placed is not None and placed.placement.origin != "job"
+                else "use larger sizes, "
+            )
+            + "or raise the limit with --max-elements",
         )
     return tets
+
+
+def densest_pattern(sizing, samples: int = 1 << 15, seed: int = 0):
+    """(placed pattern, share): the pattern that wins where most of the expected elements are, with its share
+    of them (the volume's h^-3, sampled as :func:`estimate_counts` does); (None, 0) where no point is inside."""
+    geometry = sizing.geometry
+    points = stratified_points(*geometry.bounds, samples, np.random.default_rng(seed))
+    points = points[geometry.contains(points)]
+    if len(points) == 0:
+        return None, 0.0
+    evaluation = sizing.evaluate(points)
+    won = evaluation.winner >= 0
+    if not won.any():
+        return None, 0.0
+    density = np.bincount(evaluation.winner[won], evaluation.h[won] ** -3.0, minlength=len(sizing.placed))
+    top = int(np.argmax(density))
+    return sizing.placed[top], float(density[top] / (evaluation.h**-3.0).sum())
