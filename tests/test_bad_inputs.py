@@ -908,7 +908,7 @@ def test_a_refused_count_names_the_pattern_that_needs_the_elements(capsys, tmp_p
     line = error_line(err)
     assert code == 2 and "(limit 1e+05)" in line
     assert "of them lie where 'thin-wall" in line and "(pattern 'thin-wall', placed by sizing defaults)" in line
-    assert "place 'thin-wall' in the job with coarser parameters" in line
+    assert "place 'thin-wall' in the job with coarser parameters (it then replaces the sizing defaults')" in line
     assert not mesh_files(tmp_path)
 
 

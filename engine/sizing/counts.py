@@ -97,15 +97,21 @@ def check_element_limit(sizing, max_elements: float | None = None) -> float:
         raise LimitError(
             f"the sizes would need about {tets:.3g} tetrahedra (limit {limit:.3g}{': ' + why if why else ''}); "
             f"the smallest size is {sizing.h_min:.4g}{where}",
-            fix=(
-                f"place '{placed.placement.pattern}' in the job with coarser parameters (a job's placement of a "
-                "pattern replaces the recipe's and the sizing defaults'), use larger sizes, "
-                if placed is not None and placed.placement.origin != "job"
-                else "use larger sizes, "
-            )
-            + "or raise the limit with --max-elements",
+            fix=_coarser(placed) + "use larger sizes, or raise the limit with --max-elements",
         )
     return tets
+
+
+def _coarser(placed) -> str:
+    """How to ask ``placed`` (a placed pattern, or None) for fewer elements, as the start of a fix."""
+    if placed is None:
+        return ""
+    origin, pattern = placed.placement.origin, placed.placement.pattern
+    if origin == "sizing defaults":
+        return f"place '{pattern}' in the job with coarser parameters (it then replaces the sizing defaults'), "
+    if origin.startswith("recipe"):
+        return f"give '{placed.id}' coarser parameters (copy the {origin}'s placements into the job instead), "
+    return f"give '{placed.id}' coarser parameters, "
 
 
 def densest_pattern(sizing, samples: int = 1 << 15, seed: int = 0):
