@@ -12,7 +12,8 @@ Run after meshing, the same for every packer and mesher (built-in or plug-in). T
    within it of its CAD solid's;
 5. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
    size h at each sample point, is at most ``hausdorff`` in both directions;
-6. the smallest dihedral angle is at least ``min_dihedral`` degrees;
+6. the smallest dihedral angle is at least ``min_dihedral`` degrees, or ``cusp_min_dihedral`` for a tet next to a
+   cusp (:func:`cusps`), where the geometry forces flat elements (such tets are reported, not refused);
 7. for 10-node elements, the smallest scaled Jacobian is at least ``quadratic_jacobian``.
 
 The tolerances are expert knowledge: ``acceptance:`` in the sizing defaults (knowledge/sizing.yaml), which a
@@ -38,6 +39,7 @@ class Tolerances:
     """The gate's limits; see knowledge/sizing.yaml ``acceptance:``."""
 
     min_dihedral: float = 5.0  # degrees
+    cusp_min_dihedral: float = 1.0  # degrees, for a tet next to a cusp, where the geometry forces flat ones
     volume: float = 0.02  # |V_mesh / V_input - 1|
     hausdorff: float = 0.25  # x the target size h, each direction
     quadratic_jacobian: float = QUADRATIC_FLOOR  # min scaled Jacobian of a 10-node tet
@@ -81,10 +83,11 @@ def check_mesh(
     boundary: dict,
     tolerances: Tolerances,
     quadratic_jacobian: np.ndarray | None = None,
-) -> None:
+) -> list[str]:
     """Raise MeshRejected at the first check the mesh fails (module docstring); ``quality`` is the
     TetQuality of ``mesh``, ``boundary`` the :func:`engine.quality.boundary_report` of it, and
-    ``quadratic_jacobian`` (m,) the scaled Jacobians of its 10-node elements, if any."""
+    ``quadratic_jacobian`` (m,) the scaled Jacobians of its 10-node elements, if any. Returns the warnings of a
+    mesh that passes (flat tets kept next to cusps)."""
     tets = mesh.tets
 
     def where(point) -> str:
@@ -164,24 +167,39 @@ def check_mesh(
                 fix="refine there (a smaller size, or a pattern placed on that feature) or raise "
                 f"acceptance.hausdorff in the sizing defaults; {KEEP_INVALID}",
             )
-    worst = int(np.argmin(quality.min_dihedral))
-    if not quality.min_dihedral[worst] >= tolerances.min_dihedral:
-        below = int((quality.min_dihedral < tolerances.min_dihedral).sum())
-        cusp = cusp_near(mesh.points[tets[worst]], features)
-        raise MeshRejected(
-            f"{below} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the "
-            f"smallest {quality.min_dihedral[worst]:.3g} deg at "
-            f"{where(mesh.points[tets[worst]].mean(axis=0))}{cusp}",
-            check="minimum dihedral angle",
-            fix=(
-                "remove the cusp in the model (let the face end on an edge at an angle, or cut the sliver off), "
-                "or accept flatter elements there with a lower acceptance.min_dihedral in a knowledge file"
-                if cusp
-                else "mesh again with another seed or a size that resolves the feature there, or lower "
-                "acceptance.min_dihedral in the sizing defaults"
-            )
-            + f"; {KEEP_INVALID}",
+    notes = []
+    low = np.flatnonzero(~(quality.min_dihedral >= tolerances.min_dihedral))
+    if len(low):
+        excused = next_to_cusps(mesh.points[tets[low]], features) & (
+            quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
         )
+        worst = int(low[np.argmin(np.where(excused, np.inf, quality.min_dihedral[low]))])
+        if excused.all():
+            worst = int(low[np.argmin(quality.min_dihedral[low])])
+        cusp = cusp_near(mesh.points[tets[worst]], features)
+        found = (
+            f"{len(low)} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg, the smallest "
+            f"{quality.min_dihedral[worst]:.3g} deg at {where(mesh.points[tets[worst]].mean(axis=0))}{cusp}"
+        )
+        if excused.all():
+            notes.append(
+                f"{found}: all next to cusps, where the geometry forces flat elements; kept, as "
+                f"acceptance.cusp_min_dihedral ({tolerances.cusp_min_dihedral:g} deg) allows there"
+            )
+        else:
+            raise MeshRejected(
+                found,
+                check="minimum dihedral angle",
+                fix=(
+                    "remove the cusp in the model (let the face end on an edge at an angle, or cut the sliver "
+                    "off), or accept flatter elements there with a lower acceptance.cusp_min_dihedral in a "
+                    "knowledge file"
+                    if cusp
+                    else "mesh again with another seed or a size that resolves the feature there, or lower "
+                    "acceptance.min_dihedral in the sizing defaults"
+                )
+                + f"; {KEEP_INVALID}",
+            )
     if quadratic_jacobian is not None and len(quadratic_jacobian):
         worst = int(np.argmin(quadratic_jacobian))
         if not quadratic_jacobian[worst] >= tolerances.quadratic_jacobian:
@@ -192,6 +210,7 @@ def check_mesh(
                 fix="refine the curved surface there (more elements per circle) or lower "
                 f"acceptance.quadratic_jacobian in the sizing defaults; {KEEP_INVALID}",
             )
+    return notes
 
 
 def interface_sides(tets: np.ndarray, body: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -220,28 +239,45 @@ def interface_sides(tets: np.ndarray, body: np.ndarray, triangles: np.ndarray) -
     return count[triangle_key], (high > low)[triangle_key]
 
 
-def cusp_near(corners: np.ndarray, features) -> str:
-    """A clause naming the cusp next to a tetrahedron (``corners`` (4, 3)): the corner, within 3 of the tet's
-    longest edges, that two feature curves leave less than CUSP_ANGLE apart; '' if there is none. There the
-    face between the curves is narrower than the elements for several element sizes, and flat elements are
-    forced (the cause of most minimum-angle rejections of real parts, where Gmsh gives 1-2 deg)."""
-    from .features import coordinates, leaving_angles
+def cusps(features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The corners that two feature curves leave less than CUSP_ANGLE apart: (point (k, 3), curve (k,), other
+    curve (k,), angle (k,) degrees). There the face between the curves is narrower than the elements for several
+    element sizes, and flat elements are forced (the cause of most minimum-angle rejections of real parts: a
+    fillet dying into a face, a bolt's washer face tangent to its hexagon's flats; Gmsh gives 1-4 deg there)."""
+    from .features import leaving_angles
 
     curve, end, other, _, angle = leaving_angles(features)
     cusp = np.flatnonzero(angle < CUSP_ANGLE)
-    if len(cusp) == 0:
-        return ""
     at = np.array([features.curves[c].points[0 if e == 0 else -1] for c, e in zip(curve[cusp], end[cusp])])
-    distance = np.linalg.norm(at - corners.mean(axis=0), axis=1)
-    nearest = int(np.argmin(distance))
-    if distance[nearest] > 3 * np.linalg.norm(corners[:, None] - corners[None], axis=2).max():
+    return at.reshape(-1, 3), curve[cusp], other[cusp], angle[cusp]
+
+
+def next_to_cusps(corners: np.ndarray, features) -> np.ndarray:
+    """(t,) whether each tetrahedron (``corners`` (t, 4, 3)) lies within 3 of its longest edges of a cusp
+    (:func:`cusps`)."""
+    from scipy.spatial import cKDTree
+
+    at, *_ = cusps(features)
+    if len(at) == 0 or len(corners) == 0:
+        return np.zeros(len(corners), bool)
+    distance, _ = cKDTree(at).query(corners.mean(axis=1))
+    longest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
+    return distance <= 3 * longest
+
+
+def cusp_near(corners: np.ndarray, features) -> str:
+    """A clause naming the cusp (:func:`cusps`) next to a tetrahedron (``corners`` (4, 3)), within 3 of its
+    longest edges; '' if there is none."""
+    from .features import coordinates
+
+    at, curve, other, angle = cusps(features)
+    if not next_to_cusps(corners[None], features)[0]:
         return ""
-    k = cusp[nearest]
-    scale = float(np.abs(corners).max())
+    k = int(np.argmin(np.linalg.norm(at - corners.mean(axis=0), axis=1)))
     return (
         f", next to a cusp: {features.curves[curve[k]].id} and {features.curves[other[k]].id} leave the corner at "
-        f"({coordinates(at[nearest], scale)}) {angle[k]:.2g} deg apart, and the face between them is narrower "
-        "than the elements there"
+        f"({coordinates(at[k], float(np.abs(corners).max()))}) {angle[k]:.2g} deg apart, and the face between "
+        "them is narrower than the elements there"
     )
 
 

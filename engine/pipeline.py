@@ -523,15 +523,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         )
     with stage("acceptance", timings):
         try:
-            check_mesh(
-                mesh,
-                geometry,
-                features,
-                elements,
-                boundary,
-                tolerances,
-                jacobian,
-            )
+            kept = check_mesh(mesh, geometry, features, elements, boundary, tolerances, jacobian)
             if mixed is not None:
                 quality["hex_dominant"]["boundary"] = check_mixed(mixed, mesh.volume, geometry, features, tolerances)
         except MeshRejected:
@@ -541,6 +533,10 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
                 )
                 log.warning("kept the rejected mesh for inspection: %s", ", ".join(map(str, files)))
             raise
+    for warning in kept:
+        log.warning(warning)
+    warnings = [*warnings, *kept]
+    result = replace(result, warnings=warnings)
     log.info("acceptance: passed (%.2f s)", timings["acceptance"])
     if write:
         with stage("output", timings):

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import gmsh_model
 
 from engine.acceptance import Tolerances, boundary_topology, cusp_near
 from engine.cli import main
@@ -232,3 +233,49 @@ def test_a_rejection_next_to_a_cusp_names_it():
     assert cusp_near(tet + [5.0, 0.0, 0.0], features) == ""
     features.curves[1] = curve("round-edge", [0.0, 10.0, 0.0])
     assert cusp_near(tet, features) == ""
+
+
+def _hex_head(path):
+    """A bolt head: a hexagon 10 across flats on a washer face of radius 5, which touches each flat at its
+    middle (six cusps, as on a real M6 bolt: an outside test's STEP bolt had 12 tets under 5 deg there)."""
+    import gmsh
+
+    with gmsh_model("test-hex-head") as occ:
+        washer = occ.addCylinder(0, 0, 0, 0, 0, 0.4, 5)
+        corners = [
+            occ.addPoint(10 / np.sqrt(3) * np.cos(a), 10 / np.sqrt(3) * np.sin(a), 0.4)
+            for a in np.arange(6) * np.pi / 3
+        ]
+        lines = [occ.addLine(corners[k], corners[(k + 1) % 6]) for k in range(6)]
+        hexagon = occ.addPlaneSurface([occ.addCurveLoop(lines)])
+        prism = occ.extrude([(2, hexagon)], 0, 0, 3.6)
+        occ.fuse([(3, washer)], [d for d in prism if d[0] == 3])
+        occ.synchronize()
+        gmsh.write(str(path))
+
+
+def test_flat_tets_next_to_a_cusp_are_kept_with_a_warning_others_refused(tmp_path):
+    """min_dihedral applies everywhere but next to a cusp, where acceptance.cusp_min_dihedral does: the tets
+    flattened there are reported, not refused; one as flat elsewhere, or flatter than the cusp floor, is."""
+    from engine.acceptance import check_mesh, next_to_cusps
+    from engine.job import job_from_dict
+    from engine.quality import tet_quality
+
+    _hex_head(tmp_path / "head.step")
+    result = run(job_from_dict({"geometry": {"file": str(tmp_path / "head.step")}, "size": 0.6}), write=False)
+    mesh, tolerances = result.mesh, load_knowledge().sizing["acceptance"]
+    near = next_to_cusps(mesh.points[mesh.tets], result.features)
+    centre = np.linalg.norm(mesh.points[mesh.tets].mean(axis=1)[:, :2], axis=1) < 1.0
+    assert near.any() and not near[centre].any()
+    elements = tet_quality(mesh.points, mesh.tets)
+
+    def gate(flat, angle):
+        quality = dataclasses.replace(elements, min_dihedral=np.where(flat, angle, elements.min_dihedral))
+        return check_mesh(mesh, result.geometry, result.features, quality, result.boundary, tolerances)
+
+    kept = gate(near, 3.0)
+    assert len(kept) == 1 and "next to a cusp" in kept[0] and "all next to cusps" in kept[0]
+    with pytest.raises(MeshRejected, match="minimum dihedral angle"):
+        gate(near | (centre & (np.cumsum(centre) == 1)), 3.0)
+    with pytest.raises(MeshRejected, match="cusp_min_dihedral"):
+        gate(near, 0.5 * tolerances.cusp_min_dihedral)

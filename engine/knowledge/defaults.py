@@ -30,6 +30,13 @@ SIZING_FILE = {
                 check=in_range(0.0, 60.0),
                 doc="smallest dihedral angle of any tetrahedron, degrees",
             ),
+            "cusp_min_dihedral": Field(
+                NUMBER,
+                default=Tolerances.cusp_min_dihedral,
+                check=in_range(0.0, 60.0),
+                doc="smallest dihedral angle of a tetrahedron next to a cusp (two feature curves leaving a corner "
+                "under 10 degrees apart), where the geometry forces flat elements, degrees",
+            ),
             "volume": Field(
                 NUMBER,
                 default=Tolerances.volume,
