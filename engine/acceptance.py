@@ -101,17 +101,16 @@ def check_mesh(
             check="positive volumes",
             fix=f"mesh again with another seed and report the input; {KEEP_INVALID}",
         )
-    topology = boundary_topology(tets, mesh.boundary_sides())
-    if topology["open_edges"] or topology["misoriented"] or topology["pinched"]:
+    if not boundary["two_manifold"]:
         what = (
-            f"{topology['open_edges']} boundary edges not shared by exactly two faces"
-            if topology["open_edges"]
-            else f"{topology['misoriented']} boundary edges with inconsistently oriented faces"
-            if topology["misoriented"]
-            else f"{topology['pinched']} boundary nodes where two sheets of the boundary touch at a point"
+            f"{boundary['boundary_edges']} boundary edges not shared by exactly two faces"
+            if boundary["boundary_edges"]
+            else f"{boundary['misoriented_edges']} boundary edges with inconsistently oriented faces"
+            if boundary["misoriented_edges"]
+            else f"{boundary['pinched_nodes']} boundary nodes where two sheets of the boundary touch at a point"
         )
         raise MeshRejected(
-            f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[topology['bad_node']])}",
+            f"the boundary is not a closed two-manifold: {what}, e.g. at {where(mesh.points[boundary['bad_node']])}",
             check="closed two-manifold boundary",
             fix=f"use the default mesher 'delaunay', or another seed; {KEEP_INVALID}",
         )
@@ -170,13 +169,14 @@ def check_mesh(
     notes = []
     low = np.flatnonzero(~(quality.min_dihedral >= tolerances.min_dihedral))
     if len(low):
-        excused = next_to_cusps(mesh.points[tets[low]], features) & (
+        found = cusps(features)
+        excused = next_to_cusps(mesh.points[tets[low]], found[0]) & (
             quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
         )
         failing = low[~excused] if not excused.all() else low
         worst = int(failing[np.argmin(quality.min_dihedral[failing])])
-        cusp = cusp_near(mesh.points[tets[worst]], features)
-        found = (
+        cusp = cusp_near(mesh.points[tets[worst]], features, found)
+        line = (
             f"{len(failing)} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg"
             + (
                 f" (and {int(excused.sum())} more next to cusps, down to "
@@ -189,12 +189,12 @@ def check_mesh(
         )
         if excused.all():
             notes.append(
-                f"{found}: all next to cusps, where the geometry forces flat elements; kept, as "
+                f"{line}: all next to cusps, where the geometry forces flat elements; kept, as "
                 f"acceptance.cusp_min_dihedral ({tolerances.cusp_min_dihedral:g} deg) allows there"
             )
         else:
             raise MeshRejected(
-                found,
+                line,
                 check="minimum dihedral angle",
                 fix=(
                     "remove the cusp in the model (let the face end on an edge at an angle, or cut the sliver "
@@ -258,13 +258,12 @@ def cusps(features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return at.reshape(-1, 3), curve[cusp], other[cusp], angle[cusp]
 
 
-def next_to_cusps(corners: np.ndarray, features) -> np.ndarray:
-    """(t,) whether each tetrahedron (``corners`` (t, 4, 3)) lies within 3 of its longest edges of a cusp
-    (:func:`cusps`). (Within the width of the cusp's face instead, L / sin(angle), capped at 10 L, a hex bolt
-    head's tets at its axis were next to its cusps: too wide a net.)"""
+def next_to_cusps(corners: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(t,) whether each tetrahedron (``corners`` (t, 4, 3)) lies within 3 of its longest edges of a cusp's
+    corner (``at`` (k, 3), :func:`cusps`). (Within the width of the cusp's face instead, L / sin(angle), capped
+    at 10 L, a hex bolt head's tets at its axis were next to its cusps: too wide a net.)"""
     from scipy.spatial import cKDTree
 
-    at, *_ = cusps(features)
     if len(at) == 0 or len(corners) == 0:
         return np.zeros(len(corners), bool)
     distance, _ = cKDTree(at).query(corners.mean(axis=1))
@@ -272,13 +271,13 @@ def next_to_cusps(corners: np.ndarray, features) -> np.ndarray:
     return distance <= 3 * longest
 
 
-def cusp_near(corners: np.ndarray, features) -> str:
-    """A clause naming the cusp (:func:`cusps`) next to a tetrahedron (``corners`` (4, 3)), within 3 of its
-    longest edges; '' if there is none."""
+def cusp_near(corners: np.ndarray, features, found: tuple | None = None) -> str:
+    """A clause naming the cusp (:func:`cusps`, or ``found``: its result) next to a tetrahedron (``corners``
+    (4, 3)), within 3 of its longest edges; '' if there is none."""
     from .features import coordinates
 
-    at, curve, other, angle = cusps(features)
-    if not next_to_cusps(corners[None], features)[0]:
+    at, curve, other, angle = cusps(features) if found is None else found
+    if not next_to_cusps(corners[None], at)[0]:
         return ""
     k = int(np.argmin(np.linalg.norm(at - corners.mean(axis=0), axis=1)))
     return (

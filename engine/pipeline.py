@@ -34,7 +34,7 @@ from .packing import Packing, get_packer
 from .quadratic import QUADRATIC_FLOOR, curved_volumes, scaled_jacobian
 from .quality import boundary_report, size_conformity, tet_quality
 from .recombine import recombine
-from .report import report_summary, report_targets
+from .report import report_summary, report_targets, volume_errors
 from .shapes import build_shape
 from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
 
@@ -346,15 +346,6 @@ def _mesh_assembly(job: Job, packer, mesher, geometry, features, sizing, kb, tim
     return packing, mesh
 
 
-def _volume_errors(volume: float, geometry: Geometry) -> str:
-    """A mesh's ``volume`` against the input surface's, and against the exact solid's where known (a CAD file, a
-    built-in shape)."""
-    errors = f"{100 * (volume / geometry.volume - 1):+.3f} % of the input's"
-    if geometry.exact_volume:
-        errors += f", {100 * (volume / geometry.exact_volume - 1):+.3f} % of the exact solid's"
-    return errors
-
-
 def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep_invalid: bool = False) -> Result:
     """Mesh the job's solid, check the mesh against the acceptance gate (engine/acceptance.py) and write the
     outputs when ``write``. Errors are FuzzymeshErrors; a rejected mesh raises MeshRejected and writes nothing,
@@ -440,7 +431,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         back["mean"],
         f" (x h: less the tessellation's sagitta {geometry.chord:.3g})" if geometry.chord else "",
         100 * (boundary["area"] / boundary["input_area"] - 1),
-        _volume_errors(boundary["volume"], geometry),
+        volume_errors(boundary["volume"], geometry.volume, geometry.exact_volume),
         boundary["triangle_quality"]["min"],
         timings["boundary"],
     )
@@ -519,7 +510,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
             "10-node elements: scaled Jacobian min %.3f; volume %.6g, %s",
             jacobian.min(),
             quality["quadratic"]["volume"],
-            _volume_errors(quality["quadratic"]["volume"], geometry),
+            volume_errors(quality["quadratic"]["volume"], geometry.volume, geometry.exact_volume),
         )
     with stage("acceptance", timings):
         try:

@@ -214,22 +214,24 @@ def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
     """The boundary faces of the mesh's tetrahedra checked against the input surface: triangle quality
     (:func:`triangle_quality`), the Hausdorff distance both ways, absolute and over the target size ``size(x)``
     (:func:`surface_distances`, with ``samples`` points, by default HAUSDORFF_SAMPLES_PER_TRIANGLE per boundary
-    triangle within HAUSDORFF_SAMPLES), topology (two-manifold at edges and vertices, boundary edges, edge-
-    connected components and boundary loops, by libigl) and area and volume against the input's (trimesh)."""
+    triangle within HAUSDORFF_SAMPLES), topology (:func:`engine.acceptance.boundary_topology`'s counts, which
+    the gate checks, and libigl's edge-connected components and boundary loops) and area and volume against the
+    input's (trimesh)."""
     import igl
     import trimesh
 
-    boundary = mesh.boundary_faces()
+    from .acceptance import boundary_topology
+
+    topology = boundary_topology(mesh.tets, mesh.boundary_sides())
+    boundary = topology["faces"]
     if samples is None:
         samples = int(np.clip(HAUSDORFF_SAMPLES_PER_TRIANGLE * len(boundary), *HAUSDORFF_SAMPLES))
     used, local = np.unique(boundary, return_inverse=True)
     faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)
     surface = trimesh.Trimesh(mesh.points[used], faces, process=False)
     quality = triangle_quality(surface.vertices, faces)
-    edge_manifold, *_ = igl.is_edge_manifold(faces)
-    _, edge_uses = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0, return_counts=True)
-    open_edges = int((edge_uses == 1).sum())
     components, _ = igl.facet_components(faces)
+    defects = topology["open_edges"] + topology["misoriented"] + topology["pinched"]
 
     distances = surface_distances(mesh.points, boundary, geometry.mesh, size, samples, geometry.chord)
     return {
@@ -241,10 +243,13 @@ def boundary_report(mesh, geometry, size, samples: int | None = None) -> dict:
         },
         "hausdorff_input_to_mesh": distances["input_to_mesh"],
         "hausdorff_mesh_to_input": distances["mesh_to_input"],
-        "two_manifold": bool(edge_manifold and igl.is_vertex_manifold(faces).all()),
-        "boundary_edges": open_edges,
+        "two_manifold": defects == 0,
+        "boundary_edges": topology["open_edges"],
+        "misoriented_edges": topology["misoriented"],
+        "pinched_nodes": topology["pinched"],
+        "bad_node": topology["bad_node"],
         "components": int(components),
-        "holes": len(igl.boundary_loop_all(faces)) if open_edges and edge_manifold else 0,
+        "holes": len(igl.boundary_loop_all(faces)) if topology["open_edges"] and igl.is_edge_manifold(faces)[0] else 0,
         "area": float(surface.area),
         "input_area": float(geometry.mesh.area),
         "volume": float(surface.volume),

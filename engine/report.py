@@ -56,16 +56,19 @@ def report_summary(result) -> dict:
     )
 
 
+def volume_errors(volume: float, solid: float, exact: float | None) -> str:
+    """A mesh's ``volume`` against the input surface's (``solid``) and the exact solid's (``exact``: a CAD file's
+    or a built-in shape's; None where not known), in percent."""
+    against = [(solid, "the input surface"), (exact, "the exact solid")]
+    return ", ".join(f"{100 * (volume / ref - 1):+.3f} % of {name}'s" for ref, name in against if ref)
+
+
 def _volumes(volume: dict) -> str:
     """The mesh's volume against the input surface's and the exact solid's (when known), and the 10-node mesh's."""
-
-    def errors(v):
-        against = [(volume["solid"], "the input surface"), (volume.get("exact"), "the exact solid")]
-        return "; ".join(f"{100 * (v / ref - 1):+.3f} % of {name}'s" for ref, name in against if ref)
-
-    text = f"{volume['mesh']:.6g} ({errors(volume['mesh'])})"
+    text = f"{volume['mesh']:.6g} ({volume_errors(volume['mesh'], volume['solid'], volume.get('exact'))})"
     if volume.get("ten_node"):
-        text += f"; 10-node elements {volume['ten_node']:.6g} ({errors(volume['ten_node'])})"
+        errors = volume_errors(volume["ten_node"], volume["solid"], volume.get("exact"))
+        text += f"; 10-node elements {volume['ten_node']:.6g} ({errors})"
     return text
 
 

@@ -257,14 +257,14 @@ def _hex_head(path):
 def test_flat_tets_next_to_a_cusp_are_kept_with_a_warning_others_refused(tmp_path):
     """min_dihedral applies everywhere but next to a cusp, where acceptance.cusp_min_dihedral does: the tets
     flattened there are reported, not refused; one as flat elsewhere, or flatter than the cusp floor, is."""
-    from engine.acceptance import check_mesh, next_to_cusps
+    from engine.acceptance import check_mesh, cusps, next_to_cusps
     from engine.job import job_from_dict
     from engine.quality import tet_quality
 
     _hex_head(tmp_path / "head.step")
     result = run(job_from_dict({"geometry": {"file": str(tmp_path / "head.step")}, "size": 0.6}), write=False)
     mesh, tolerances = result.mesh, load_knowledge().sizing["acceptance"]
-    near = next_to_cusps(mesh.points[mesh.tets], result.features)
+    near = next_to_cusps(mesh.points[mesh.tets], cusps(result.features)[0])
     centre = np.linalg.norm(mesh.points[mesh.tets].mean(axis=1)[:, :2], axis=1) < 1.0
     assert near.any() and not near[centre].any()
     elements = tet_quality(mesh.points, mesh.tets)
