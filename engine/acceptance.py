@@ -31,6 +31,7 @@ from .errors import MeshRejected
 from .quadratic import QUADRATIC_FLOOR
 
 CUSP_ANGLE = 10.0  # degrees: two feature curves that leave a corner closer than this make a cusp
+NEAR_CUSP = 10.0  # longest edges of a tet: how far from a cusp's corner its face may stay narrower than the tet
 KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invalid.* for inspection"
 
 
@@ -170,7 +171,7 @@ def check_mesh(
     low = np.flatnonzero(~(quality.min_dihedral >= tolerances.min_dihedral))
     if len(low):
         found = cusps(features)
-        excused = next_to_cusps(mesh.points[tets[low]], found[0]) & (
+        excused = (next_to_cusps(mesh.points[tets[low]], features, found) >= 0) & (
             quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
         )
         failing = low[~excused] if not excused.all() else low
@@ -258,28 +259,41 @@ def cusps(features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return at.reshape(-1, 3), curve[cusp], other[cusp], angle[cusp]
 
 
-def next_to_cusps(corners: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """(t,) whether each tetrahedron (``corners`` (t, 4, 3)) lies within 3 of its longest edges of a cusp's
-    corner (``at`` (k, 3), :func:`cusps`). (Within the width of the cusp's face instead, L / sin(angle), capped
-    at 10 L, a hex bolt head's tets at its axis were next to its cusps: too wide a net.)"""
-    from scipy.spatial import cKDTree
+def next_to_cusps(corners: np.ndarray, features, found: tuple) -> np.ndarray:
+    """(t,) for each tetrahedron (``corners`` (t, 4, 3)) the index of the cusp in ``found`` (:func:`cusps`) it is
+    next to, -1 if none: its centre is within one of its longest edges of both curves that leave the cusp's corner
+    (it spans the face between them, narrower than it there) and within NEAR_CUSP longest edges of the corner.
+    (A ball of three edges around the corner missed a flat tet 3 edges along a circle tangent to a line, whose
+    face is 0.007 mm wide there; a ball of L / sin(angle) took in a hex bolt head's tets at its axis.)"""
+    from .anchors import curve_distance
 
+    at, curve, other, _ = found
+    which = np.full(len(corners), -1)
     if len(at) == 0 or len(corners) == 0:
-        return np.zeros(len(corners), bool)
-    distance, _ = cKDTree(at).query(corners.mean(axis=1))
+        return which
+    centre = corners.mean(axis=1)
     longest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
-    return distance <= 3 * longest
+    for k in range(len(at)):
+        near = np.flatnonzero((which < 0) & (np.linalg.norm(centre - at[k], axis=1) <= NEAR_CUSP * longest))
+        if len(near):
+            spread = np.maximum(
+                curve_distance(features.curves[curve[k]], 0.0)(centre[near]),
+                curve_distance(features.curves[other[k]], 0.0)(centre[near]),
+            )
+            which[near[spread <= longest[near]]] = k
+    return which
 
 
 def cusp_near(corners: np.ndarray, features, found: tuple | None = None) -> str:
-    """A clause naming the cusp (:func:`cusps`, or ``found``: its result) next to a tetrahedron (``corners``
-    (4, 3)), within 3 of its longest edges; '' if there is none."""
+    """A clause naming the cusp (:func:`cusps`, or ``found``: its result) a tetrahedron (``corners`` (4, 3)) is
+    next to (:func:`next_to_cusps`); '' if there is none."""
     from .features import coordinates
 
-    at, curve, other, angle = cusps(features) if found is None else found
-    if not next_to_cusps(corners[None], at)[0]:
+    found = cusps(features) if found is None else found
+    at, curve, other, angle = found
+    k = int(next_to_cusps(corners[None], features, found)[0])
+    if k < 0:
         return ""
-    k = int(np.argmin(np.linalg.norm(at - corners.mean(axis=0), axis=1)))
     return (
         f", next to a cusp: {features.curves[curve[k]].id} and {features.curves[other[k]].id} leave the corner at "
         f"({coordinates(at[k], float(np.abs(corners).max()))}) {angle[k]:.2g} deg apart, and the face between "

@@ -217,11 +217,13 @@ def test_population_rules_that_delete_every_bubble_give_no_mesh(capsys, tmp_path
 
 
 def test_a_rejection_next_to_a_cusp_names_it():
-    """Two curves leaving a corner 2.9 deg apart are a cusp: a tet within three of its edges of that corner is
-    said to be next to it, one farther away or at a 90 deg corner is not."""
+    """Two curves leaving a corner 2.9 deg apart are a cusp: a tet that spans the face between them near the
+    corner is said to be next to it; one as close to the corner but off the face, one farther along than ten of
+    its edges, or one at a 90 deg corner is not."""
+    from engine.features import Curve
 
     def curve(name, end):
-        return SimpleNamespace(id=name, points=np.array([[0.0, 0.0, 0.0], end]))
+        return Curve(id=name, points=np.array([[0.0, 0.0, 0.0], end]), closed=False, vertices=None)
 
     features = SimpleNamespace(
         corners=[SimpleNamespace(point=np.zeros(3))],
@@ -230,7 +232,9 @@ def test_a_rejection_next_to_a_cusp_names_it():
     tet = np.array([[1.0, 0.0, 0.0], [1.5, 0.1, 0.0], [1.2, 0.0, 0.4], [1.3, 0.3, 0.2]])
     clause = cusp_near(tet, features)
     assert "wall-edge and round-edge leave the corner at (0, 0, 0) 2.9 deg apart" in clause
-    assert cusp_near(tet + [5.0, 0.0, 0.0], features) == ""
+    assert cusp_near(tet + [3.0, 0.0, 0.0], features) != "", "3 along, the face (0.2 wide) is still narrower"
+    assert cusp_near(tet + [0.0, -1.0, 0.0], features) == "", "off the face, as near the corner"
+    assert cusp_near(0.1 * tet + [9.0, 0.0, 0.0], features) == "", "farther along than ten of its edges"
     features.curves[1] = curve("round-edge", [0.0, 10.0, 0.0])
     assert cusp_near(tet, features) == ""
 
@@ -264,7 +268,7 @@ def test_flat_tets_next_to_a_cusp_are_kept_with_a_warning_others_refused(tmp_pat
     _hex_head(tmp_path / "head.step")
     result = run(job_from_dict({"geometry": {"file": str(tmp_path / "head.step")}, "size": 0.6}), write=False)
     mesh, tolerances = result.mesh, load_knowledge().sizing["acceptance"]
-    near = next_to_cusps(mesh.points[mesh.tets], cusps(result.features)[0])
+    near = next_to_cusps(mesh.points[mesh.tets], result.features, cusps(result.features)) >= 0
     centre = np.linalg.norm(mesh.points[mesh.tets].mean(axis=1)[:, :2], axis=1) < 1.0
     assert near.any() and not near[centre].any()
     elements = tet_quality(mesh.points, mesh.tets)
