@@ -320,7 +320,7 @@ class _CadFaces:
         patches = [
             _face_kinds(
                 dataclasses.replace(
-                    patch, names=[self.face_names[k] for k in members], surface=self.surfaces[members[0]].kind
+                    patch, names=[self.face_names[k] for k in members], surface=self.surfaces[members[0]].label
                 ),
                 self.surfaces[members[0]],
                 geometry,
@@ -443,6 +443,12 @@ class Surface:
     shape: str | None = None
     fitted: object | None = None  # the analytic surface a non-analytic face's points fit
     blend: float | None = None  # a non-analytic face's one steady principal radius (a rolling ball blend's)
+
+    @property
+    def label(self) -> str:
+        """The face's type for a user: its own, and the analytic type it lies on when that differs ('Unknown on
+        Cylinder': a face of a type Gmsh does not name whose points fit a cylinder)."""
+        return f"{self.kind} on {self.shape}" if self.shape and self.shape != self.kind else self.kind
 
     @property
     def form(self) -> str:

@@ -37,6 +37,8 @@ EXACT_TOLERANCE = 1e-6  # x the model size: a float32 STL's vertices lie within 
 ROUNDS = 8  # alternating projections onto the surfaces a curve borders
 FAITHFUL = 0.05  # x the local element size: how far the input's facets may lie from the surface nodes go onto
 SAME_SURFACE = 1e-4  # x the model size, and radians: two patches' fitted surfaces this close are one surface
+CLOSER = 10.0  # a simpler surface that fits a face is taken over a closer one if its error is within this factor
+EXACT_FIT = 1e-6  # ... or below this x the tolerance (roundoff: every surface that holds the face fits it exactly)
 # barycentric points of a facet where its distance from the surface is sampled: centroid, edge midpoints, and
 # between them (the facet's deepest point on a cylinder, sphere or cone lies inside it or on an edge)
 FACET_SAMPLES = np.array(
@@ -446,7 +448,9 @@ def _surface_or_curve(mesh, geometry, features) -> tuple[np.ndarray, np.ndarray]
 
 def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube_radii=()):
     """The simplest Plane, Sphere, CylinderSurface, Cone or Torus that all ``points`` (k, 3) lie on within
-    ``tolerance``, or None; for a CAD face's own points (a B-spline or other non-analytic face evaluated by
+    ``tolerance`` and about as closely as the closest of them (within CLOSER x its error, or EXACT_FIT x
+    ``tolerance``: a cylinder's narrow band, 0.4 x 5 mm on a bolt's washer face, lies within 0.004 of a sphere
+    too), or None; for a CAD face's own points (a B-spline or other non-analytic face evaluated by
     the kernel: no faceting error) with their unit ``normals`` (k, 3, either sign). A cylinder's axis is
     the direction its normals all miss; a cone's tangent planes all hold its apex (:func:`fit_cone`); a
     torus's tube centres are the points moved along their normals by its tube radius, one of
@@ -455,38 +459,41 @@ def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube
     if len(points) < 9:
         return None
 
-    def fits(surface) -> bool:
-        return bool(np.linalg.norm(surface.project(points) - points, axis=1).max() <= tolerance)
-
-    centre = points.mean(axis=0)
-    plane = Plane(centre, np.linalg.svd(points - centre, full_matrices=False)[2][2])
-    if fits(plane):
-        return plane
-    matrix = np.column_stack([2 * points, np.ones(len(points))])
-    solution, *_ = np.linalg.lstsq(matrix, (points**2).sum(axis=1), rcond=None)
-    sphere = Sphere(solution[:3], float(np.sqrt(max(solution[3] + solution[:3] @ solution[:3], 0.0))))
-    if fits(sphere):
-        return sphere
-    axis = np.linalg.svd(normals, full_matrices=False)[2][2]
-    circle = _circle_across(points, axis)
-    if circle is not None and fits(cylinder := CylinderSurface(circle[0], axis, circle[1])):
-        return cylinder
-    cone = fit_cone(points, normals, points)
-    if cone is not None and fits(cone):
-        return cone
-    for radius in tube_radii:
-        if not np.isfinite(radius) or radius <= 0:
-            continue
-        for sign in (1.0, -1.0):
-            tube = points + sign * radius * normals
-            middle = tube.mean(axis=0)
-            spread, vt = np.linalg.svd(tube - middle, full_matrices=False)[1:]
-            if spread[1] <= tolerance:  # the tube centres are one point: a sphere
+    def candidates():  # the simplest first
+        centre = points.mean(axis=0)
+        yield Plane(centre, np.linalg.svd(points - centre, full_matrices=False)[2][2])
+        matrix = np.column_stack([2 * points, np.ones(len(points))])
+        solution, *_ = np.linalg.lstsq(matrix, (points**2).sum(axis=1), rcond=None)
+        yield Sphere(solution[:3], float(np.sqrt(max(solution[3] + solution[:3] @ solution[:3], 0.0))))
+        axis = np.linalg.svd(normals, full_matrices=False)[2][2]
+        circle = _circle_across(points, axis)
+        if circle is not None:
+            yield CylinderSurface(circle[0], axis, circle[1])
+        cone = fit_cone(points, normals, points)
+        if cone is not None:
+            yield cone
+        for radius in tube_radii:
+            if not np.isfinite(radius) or radius <= 0:
                 continue
-            ring = _circle_across(tube, vt[2])
-            if ring is not None and fits(torus := Torus(ring[0], vt[2], ring[1], float(radius))):
-                return torus
-    return None
+            for sign in (1.0, -1.0):
+                tube = points + sign * radius * normals
+                middle = tube.mean(axis=0)
+                spread, vt = np.linalg.svd(tube - middle, full_matrices=False)[1:]
+                if spread[1] <= tolerance:  # the tube centres are one point: a sphere
+                    continue
+                ring = _circle_across(tube, vt[2])
+                if ring is not None:
+                    yield Torus(ring[0], vt[2], ring[1], float(radius))
+
+    fitting = [
+        (surface, error)
+        for surface in candidates()
+        if (error := float(np.linalg.norm(surface.project(points) - points, axis=1).max())) <= tolerance
+    ]
+    if not fitting:
+        return None
+    best = min(error for _, error in fitting)
+    return next(surface for surface, error in fitting if error <= max(CLOSER * best, EXACT_FIT * tolerance))
 
 
 def _circle_across(points: np.ndarray, axis: np.ndarray):

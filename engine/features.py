@@ -124,7 +124,7 @@ class Patch:
     names: list[str] = field(default_factory=list)
     kinds: list[str] = field(default_factory=list)
     circle: Circle | None = None  # a toroidal blend's tube (CAD input): its radius is the blend's
-    surface: str | None = None  # the CAD face type (Plane, Cylinder, Torus, BSpline surface, ...), CAD input only
+    surface: str | None = None  # the CAD face type (Plane, Cylinder, Torus, BSpline surface on Cone, ...), CAD only
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -143,7 +143,8 @@ def _kinds(features) -> dict:
 def test_bspline_faces_get_the_kinds_and_radii_of_their_analytic_faces(step_files, part):
     _, _, analytic = solid_features(step_files[f"{part}-analytic"][0])
     _, geometry, features = solid_features(step_files[part][0])
-    assert {p.surface for p in features.patches} == {"BSpline surface"}
+    fitted = {"bracket": {"Plane", "Cylinder"}, "boss_plate": {"Plane", "Cylinder", "Torus", "Cone"}}[part]
+    assert {p.surface for p in features.patches} == {f"BSpline surface on {shape}" for shape in fitted}
     kinds = _kinds(features)
     assert kinds == _kinds(analytic)
     expected = {
@@ -168,7 +169,7 @@ def test_a_hole_lofted_through_splines_is_a_hole_on_its_cad_face(step_files):
     """Off its cylinder by more than an STL's vertices would be (EXACT_TOLERANCE): a hole of the fitted radius,
     whose mesh nodes go onto the CAD face itself."""
     _, _, features = solid_features(step_files["spline_hole"][0])
-    ((k, hole),) = [(k, p) for k, p in enumerate(features.patches) if p.surface == "BSpline surface"]
+    ((k, hole),) = [(k, p) for k, p in enumerate(features.patches) if p.surface == "BSpline surface on Cylinder"]
     assert hole.kinds == ["hole"] and hole.cylinder.radius == pytest.approx(6.0, rel=1e-4)
     assert isinstance(features.exact[0][k], CadEntity)
 
@@ -195,6 +196,8 @@ def test_fit_analytic_tells_the_shapes_apart():
 
     cylinder = fit_analytic(5 * ring + np.outer(10 * v, z), ring, 1e-6)
     assert isinstance(cylinder, CylinderSurface) and cylinder.radius == pytest.approx(5)
+    band = 5 * ring + np.outer(0.4 * v, z)  # a bolt's washer face: within 0.004 of a sphere as well
+    assert isinstance(fit_analytic(band, ring, 0.005), CylinderSurface)
 
     angle = math.radians(30)
     points = (5 + 10 * v)[:, None] * (math.sin(angle) * ring + math.cos(angle) * z)
@@ -219,7 +222,7 @@ def test_features_lists_the_bspline_holes_and_fillets(step_files, capsys):
     rows = [re.split(r"\s{2,}", line.strip()) for line in capsys.readouterr().out.splitlines()[2:]]
     listed = sorted((cells[2], cells[3].split(", r ")[-1]) for cells in rows if cells[0].startswith("patch-"))
     assert [(kind, radius) for kind, radius in listed if kind != "-"] == [
-        ("countersink", "BSpline surface A 146.5"),
+        ("countersink", "BSpline surface on Cone A 146.5"),
         ("fillet", "3"),
         ("hole", "4"),
         ("hole", "5"),
@@ -265,7 +268,7 @@ def test_a_folded_tessellation_is_made_again(step_files, tmp_path, caplog):
     assert "meshed by Gmsh" not in caplog.text
     names = [p.names[0] for p in features.patches]
     assert len(names) == len(set(names)) == 10
-    rounds = [p for p in features.patches if p.surface == "BSpline surface" and p.cylinder is not None]
+    rounds = [p for p in features.patches if p.surface == "BSpline surface on Cylinder" and p.cylinder is not None]
     assert [p.cylinder.radius for p in rounds] == pytest.approx([3] * 4, rel=1e-4)
     assert not any(p.kinds for p in rounds)
     job = job_from_dict(
