@@ -912,6 +912,22 @@ def test_a_refused_count_names_the_pattern_that_needs_the_elements(capsys, tmp_p
     assert not mesh_files(tmp_path)
 
 
+def test_a_refused_count_names_the_pattern_whose_size_the_gradation_spreads(capsys, tmp_path):
+    """A block with a 0.1 mm slit: the slit's narrow-gap size (0.05) grows by the gradation through most of the
+    block, where the base pattern wins with a far larger size; the line names the slit's pattern, not 'base'
+    (an outside test's adapter with four 0.1 mm slits)."""
+    block = trimesh.creation.box([20.0, 20.0, 10.0])
+    slit = trimesh.creation.box([0.1, 30.0, 8.0])
+    slit.apply_translation([0.0, 0.0, 2.0])
+    block.difference(slit, engine="manifold").export(str(tmp_path / "slit.stl"))
+    job = write_job(tmp_path, "geometry: {file: slit.stl}\noutput: {directory: out}\n")
+    code, _, err = run_cli(capsys, job, "--max-elements", "1e4")
+    line = error_line(err)
+    assert code == 2 and "of them lie where the size grows (by the gradation, 1.3) from the 0.05 that" in line, line
+    assert "'narrow-gap@gap-" in line and "place 'narrow-gap' in the job with coarser parameters" in line
+    assert not mesh_files(tmp_path)
+
+
 def test_impossible_size_names_the_job_file(capsys, tmp_path):
     job = _junction_too_fine(tmp_path)
     line = error_line(run_cli(capsys, job)[2])
