@@ -13,7 +13,8 @@ Run after meshing, the same for every packer and mesher (built-in or plug-in). T
 5. the two-sided Hausdorff distance between the mesh boundary and the input surface, over the target
    size h at each sample point, is at most ``hausdorff`` in both directions;
 6. the smallest dihedral angle is at least ``min_dihedral`` degrees, or ``cusp_min_dihedral`` for a tet next to a
-   cusp (:func:`cusps`), where the geometry forces flat elements (such tets are reported, not refused);
+   cusp (:func:`cusps`) or across a face narrower than a quarter of it (:func:`next_to_narrow_faces`), where the
+   geometry forces flat elements (such tets are reported, not refused);
 7. for 10-node elements, the smallest scaled Jacobian is at least ``quadratic_jacobian``.
 
 The tolerances are expert knowledge: ``acceptance:`` in the sizing defaults (knowledge/sizing.yaml), which a
@@ -32,6 +33,7 @@ from .quadratic import QUADRATIC_FLOOR
 
 CUSP_ANGLE = 10.0  # degrees: two feature curves that leave a corner closer than this make a cusp
 NEAR_CUSP = 10.0  # longest edges of a tet: how far from a cusp's corner its face may stay narrower than the tet
+NARROW = 0.25  # a face narrower than this x a tet's longest edge, within that edge of it, forces it flat
 KEEP_INVALID = "run again with --keep-invalid to write the mesh as <name>.invalid.* for inspection"
 
 
@@ -40,7 +42,7 @@ class Tolerances:
     """The gate's limits; see knowledge/sizing.yaml ``acceptance:``."""
 
     min_dihedral: float = 5.0  # degrees
-    cusp_min_dihedral: float = 1.0  # degrees, for a tet next to a cusp, where the geometry forces flat ones
+    cusp_min_dihedral: float = 1.0  # degrees, next to a cusp or a narrow face, where the geometry forces flat tets
     volume: float = 0.02  # |V_mesh / V_input - 1|
     hausdorff: float = 0.25  # x the target size h, each direction
     quadratic_jacobian: float = QUADRATIC_FLOOR  # min scaled Jacobian of a 10-node tet
@@ -171,37 +173,37 @@ def check_mesh(
     low = np.flatnonzero(~(quality.min_dihedral >= tolerances.min_dihedral))
     if len(low):
         found = cusps(features)
-        excused = (next_to_cusps(mesh.points[tets[low]], features, found) >= 0) & (
-            quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
-        )
+        cause = forced_flat(mesh.points[tets[low]], geometry, features, found)
+        excused = (cause[0] >= 0) | (cause[1] >= 0)
+        excused &= quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
         failing = low[~excused] if not excused.all() else low
         worst = int(failing[np.argmin(quality.min_dihedral[failing])])
-        cusp = cusp_near(mesh.points[tets[worst]], features, found)
+        clause = forced_flat_clause(mesh.points[tets[worst]], geometry, features, found)
         line = (
             f"{len(failing)} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg"
             + (
-                f" (and {int(excused.sum())} more next to cusps, down to "
+                f" (and {int(excused.sum())} more next to cusps or narrow faces, down to "
                 f"{quality.min_dihedral[low[excused]].min():.3g} deg, which acceptance.cusp_min_dihedral allows)"
                 if excused.any() and not excused.all()
                 else ""
             )
             + f", the smallest {quality.min_dihedral[worst]:.3g} deg at "
-            f"{where(mesh.points[tets[worst]].mean(axis=0))}{cusp}"
+            f"{where(mesh.points[tets[worst]].mean(axis=0))}{clause}"
         )
         if excused.all():
             notes.append(
-                f"{line}: all next to cusps, where the geometry forces flat elements; kept, as "
-                f"acceptance.cusp_min_dihedral ({tolerances.cusp_min_dihedral:g} deg) allows there"
+                f"{line}: all next to cusps or faces narrower than the elements, where the geometry forces flat "
+                f"elements; kept, as acceptance.cusp_min_dihedral ({tolerances.cusp_min_dihedral:g} deg) allows there"
             )
         else:
             raise MeshRejected(
                 line,
                 check="minimum dihedral angle",
                 fix=(
-                    "remove the cusp in the model (let the face end on an edge at an angle, or cut the sliver "
-                    "off), or accept flatter elements there with a lower acceptance.cusp_min_dihedral in a "
-                    "knowledge file"
-                    if cusp
+                    "remove the cusp or the narrow face in the model (let the face end on an edge at an angle, or "
+                    "cut the sliver off), or accept flatter elements there with a lower "
+                    "acceptance.cusp_min_dihedral in a knowledge file"
+                    if clause
                     else "mesh again with another seed or a size that resolves the feature there, or lower "
                     "acceptance.min_dihedral in the sizing defaults"
                 )
@@ -284,21 +286,66 @@ def next_to_cusps(corners: np.ndarray, features, found: tuple) -> np.ndarray:
     return which
 
 
-def cusp_near(corners: np.ndarray, features, found: tuple | None = None) -> str:
-    """A clause naming the cusp (:func:`cusps`, or ``found``: its result) a tetrahedron (``corners`` (4, 3)) is
-    next to (:func:`next_to_cusps`); '' if there is none."""
-    from .features import coordinates
+def next_to_narrow_faces(corners: np.ndarray, geometry, features) -> tuple[np.ndarray, np.ndarray]:
+    """(facet (t,), width (t,)): for each tetrahedron (``corners`` (t, 4, 3)) an input facet within its longest
+    edge of its centre where the face is narrower than NARROW x that edge (:func:`engine.facewidth.facet_widths`:
+    two feature curves bounding one face, that far apart), and that width; facet -1 where none. No element
+    size the rules allow resolves such a face (a recess 3 um deep in a plate's bottom: its rim is a 0.003 wide
+    strip at h 0.07)."""
+    import igl
 
-    found = cusps(features) if found is None else found
-    at, curve, other, angle = found
-    k = int(next_to_cusps(corners[None], features, found)[0])
-    if k < 0:
-        return ""
-    return (
-        f", next to a cusp: {features.curves[curve[k]].id} and {features.curves[other[k]].id} leave the corner at "
-        f"({coordinates(at[k], float(np.abs(corners).max()))}) {angle[k]:.2g} deg apart, and the face between "
-        "them is narrower than the elements there"
+    from .facewidth import facet_widths
+
+    which, width = np.full(len(corners), -1), np.full(len(corners), np.inf)
+    if len(corners) == 0:
+        return which, width
+    centre = corners.mean(axis=1)
+    longest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
+    widths = facet_widths(geometry, features, float(longest.max()))
+    narrow = np.flatnonzero(widths < NARROW * longest.max())
+    if len(narrow) == 0:
+        return which, width
+    squared, nearest, _ = igl.point_mesh_squared_distance(
+        np.ascontiguousarray(centre, dtype=np.float64),
+        np.asarray(geometry.mesh.vertices, np.float64),
+        np.ascontiguousarray(geometry.mesh.faces[narrow], dtype=np.int64),
     )
+    facet = narrow[nearest]
+    near = (np.sqrt(squared) <= longest) & (widths[facet] < NARROW * longest)
+    which[near], width[near] = facet[near], widths[facet[near]]
+    return which, width
+
+
+def forced_flat(corners: np.ndarray, geometry, features, found: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """(cusp (t,), narrow facet (t,)): for each tetrahedron (``corners`` (t, 4, 3)) the cusp in ``found``
+    (:func:`cusps`) it is next to (:func:`next_to_cusps`) and the facet of a narrow face next to it
+    (:func:`next_to_narrow_faces`, looked for only where there is no cusp), -1 where none."""
+    cusp = next_to_cusps(corners, features, found)
+    narrow = np.full(len(corners), -1)
+    alone = np.flatnonzero(cusp < 0)
+    if len(alone):
+        narrow[alone] = next_to_narrow_faces(corners[alone], geometry, features)[0]
+    return cusp, narrow
+
+
+def forced_flat_clause(corners: np.ndarray, geometry, features, found: tuple) -> str:
+    """A clause naming the cusp (:func:`cusps`' ``found``) or the narrow face a tetrahedron (``corners`` (4, 3))
+    is next to (:func:`forced_flat`); '' if none."""
+    from .features import coordinates, describe
+
+    cusp = int(next_to_cusps(corners[None], features, found)[0])
+    if cusp >= 0:
+        at, curve, other, angle = found
+        return (
+            f", next to a cusp: {features.curves[curve[cusp]].id} and {features.curves[other[cusp]].id} leave the "
+            f"corner at ({coordinates(at[cusp], float(np.abs(corners).max()))}) {angle[cusp]:.2g} deg apart, and "
+            "the face between them is narrower than the elements there"
+        )
+    facet, width = next_to_narrow_faces(corners[None], geometry, features)
+    if facet[0] >= 0:
+        patch = features.patches[int(features.face_patch[facet[0]])]
+        return f", next to {describe(patch)}, {width[0]:.3g} wide there: narrower than the elements"
+    return ""
 
 
 def _locate(point: np.ndarray, geometry, features) -> str:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import gmsh_model
 
-from engine.acceptance import Tolerances, boundary_topology, cusp_near
+from engine.acceptance import Tolerances, boundary_topology, cusps, forced_flat_clause, next_to_cusps
 from engine.cli import main
 from engine.errors import MeshRejected
 from engine.job import load_job
@@ -230,13 +230,43 @@ def test_a_rejection_next_to_a_cusp_names_it():
         curves=[curve("wall-edge", [10.0, 0.0, 0.0]), curve("round-edge", [10.0, 0.5, 0.0])],
     )
     tet = np.array([[1.0, 0.0, 0.0], [1.5, 0.1, 0.0], [1.2, 0.0, 0.4], [1.3, 0.3, 0.2]])
-    clause = cusp_near(tet, features)
+    clause = forced_flat_clause(tet, None, features, cusps(features))
     assert "wall-edge and round-edge leave the corner at (0, 0, 0) 2.9 deg apart" in clause
-    assert cusp_near(tet + [3.0, 0.0, 0.0], features) != "", "3 along, the face (0.2 wide) is still narrower"
-    assert cusp_near(tet + [0.0, -1.0, 0.0], features) == "", "off the face, as near the corner"
-    assert cusp_near(0.1 * tet + [9.0, 0.0, 0.0], features) == "", "farther along than ten of its edges"
+
+    def near(corners):
+        return next_to_cusps(corners[None], features, cusps(features))[0] >= 0
+
+    assert near(tet)
+    assert near(tet + [3.0, 0.0, 0.0]), "3 along, the face (0.2 wide) is still narrower"
+    assert not near(tet + [0.0, -1.0, 0.0]), "off the face, as near the corner"
+    assert not near(0.1 * tet + [9.0, 0.0, 0.0]), "farther along than ten of its edges"
     features.curves[1] = curve("round-edge", [0.0, 10.0, 0.0])
-    assert cusp_near(tet, features) == ""
+    assert not near(tet)
+
+
+def test_a_tet_across_a_face_narrower_than_a_quarter_of_it_is_next_to_a_narrow_face(tmp_path):
+    """A block with a recess 0.002 deep in its bottom (an outside test's endstop: 3 um, 56 tets under 5 deg):
+    the recess's rim is a face 0.002 wide. A tet of edge 0.05 across it is next to that narrow face, and the
+    clause names the face and its width; one of edge 0.004 (the face is wider than a quarter of it), or one far
+    from the rim, is not."""
+    import trimesh
+
+    from engine.acceptance import next_to_narrow_faces
+    from engine.describe import solid_features
+
+    block = trimesh.creation.box([4.0, 4.0, 2.0])
+    recess = trimesh.creation.box([1.5, 0.5, 0.002])
+    recess.apply_translation([0.0, 0.0, -0.999])
+    block.difference(recess, engine="manifold").export(str(tmp_path / "recess.stl"))
+    _, geometry, features = solid_features(tmp_path / "recess.stl")
+    unit = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) - 0.25
+    rim = np.array([0.75, 0.0, -0.999])
+    tets = np.stack([rim + 0.05 * unit, rim + 0.004 * unit, [0.0, 1.5, 0.0] + 0.05 * unit])
+    facet, width = next_to_narrow_faces(tets, geometry, features)
+    assert facet[0] >= 0 and width[0] == pytest.approx(0.002, rel=0.5) and (facet[1:] == -1).all()
+    clause = forced_flat_clause(tets[0], geometry, features, cusps(features))
+    assert f"next to {features.patches[features.face_patch[facet[0]]].id} (centroid" in clause
+    assert "wide there: narrower than the elements" in clause
 
 
 def _hex_head(path):
@@ -279,7 +309,9 @@ def test_flat_tets_next_to_a_cusp_are_kept_with_a_warning_others_refused(tmp_pat
 
     kept = gate(near, 3.0)
     assert len(kept) == 1 and "next to a cusp" in kept[0] and "all next to cusps" in kept[0]
-    with pytest.raises(MeshRejected, match=r"1 tetrahedra have .* \(and \d+ more next to cusps, down to 3 deg"):
+    with pytest.raises(
+        MeshRejected, match=r"1 tetrahedra have .* \(and \d+ more next to cusps or narrow faces, down to 3 deg"
+    ):
         gate(near | (centre & (np.cumsum(centre) == 1)), 3.0)
     with pytest.raises(MeshRejected, match="cusp_min_dihedral"):
         gate(near, 0.5 * tolerances.cusp_min_dihedral)

@@ -35,7 +35,8 @@ SIZING_FILE = {
                 default=Tolerances.cusp_min_dihedral,
                 check=in_range(0.0, 60.0),
                 doc="smallest dihedral angle of a tetrahedron next to a cusp (two feature curves leaving a corner "
-                "under 10 degrees apart), where the geometry forces flat elements, degrees",
+                "under 10 degrees apart) or across a face narrower than a quarter of it, where the geometry forces "
+                "flat elements, degrees",
             ),
             "volume": Field(
                 NUMBER,
