@@ -337,6 +337,11 @@ def _cmd_features(args) -> int:
         + (f", {geometry.bodies} bodies)" if geometry.bodies > 1 else ")")
     )
     print(feature_table(records, geometry.scale))
+    if any(r.get("sharp") is False for r in records["curves"]):
+        print(
+            "(smooth cut): not an edge of the solid but a cut across a smooth surface, where a face meets a tangent "
+            "one (a fillet's border) or a curved surface is cut into pieces that can be flattened"
+        )
     return 0
 
 

@@ -391,8 +391,9 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
         if moved["nodes_kept_for_validity"]
         else "",
-        f"; {moved['patches_left_on_facets']} curved patches left on the input's facets (a coarse STL: they stray "
-        f"from their fitted surface up to {moved['facet_deviation_left']:.2f} x what the mesh may)"
+        f"; {moved['patches_left_on_facets']} curved patches left on the input's facets (a coarse STL: its facets "
+        f"lie up to {moved['facet_deviation_left']:.3g} times farther from the surface fitted to them than the "
+        "larger of 0.05 h and the mesh's own chord sagitta there, so the nodes stay on the facets)"
         if moved.get("patches_left_on_facets")
         else "",
         timings["exact"],

@@ -95,3 +95,19 @@ def test_describe_gives_id_and_centroid(built):
     rim = next(c for c in features.curves if "hole" in c.names and np.allclose(c.points[:, 2], 10))
     assert describe(rim) == f"{rim.id} (centroid 0, 0, 10)"
     assert describe(features.corners[0]).startswith(f"{features.corners[0].id} (centroid -100, -50, ")
+
+
+def test_a_listing_with_smooth_cuts_says_what_they_are(capsys, tmp_path):
+    """A ball's surface is cut into charts along smooth curves: the table marks them and a line below says what a
+    smooth cut is (an outside tester found '(smooth cut)' unexplained); a plate, with none, has no such line."""
+    import trimesh
+
+    trimesh.creation.icosphere(subdivisions=3, radius=5.0).export(str(tmp_path / "ball.stl"))
+    code, out, _ = run(capsys, tmp_path / "ball.stl")
+    lines = out.splitlines()
+    assert code == 0 and any("(smooth cut)" in line for line in lines[2:-1])
+    assert lines[-1].startswith("(smooth cut): not an edge of the solid but a cut across a smooth surface")
+    plate = tmp_path / "plate.yaml"
+    plate.write_text(yaml.safe_dump({"geometry": {"shape": "plate_with_hole"}}))
+    code, out, _ = run(capsys, plate)
+    assert code == 0 and "(smooth cut)" not in out
