@@ -784,7 +784,9 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
     radial = face_centres - centre
     radial -= np.outer(radial @ axis, axis)
     concave = bool(np.mean(np.einsum("ij,ij->i", radial, face_normals)) < 0)
-    angles = np.sort(np.arctan2(radial @ np.cross(axis, _any_perpendicular(axis)), radial @ _any_perpendicular(axis)))
+    around = np.vstack([radial, vertices - centre])  # a 7-sided hole's facet centres are 51 deg apart, with its
+    around -= np.outer(around @ axis, axis)  # vertices 26: a full turn (it was a 'fillet' at feature angle 55)
+    angles = np.sort(np.arctan2(around @ np.cross(axis, _any_perpendicular(axis)), around @ _any_perpendicular(axis)))
     gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
     if axis[np.argmax(np.abs(axis))] < 0:
         axis = -axis

@@ -125,3 +125,19 @@ def test_a_plane_written_to_a_few_nanometres_is_a_plane():
     features = detect_features(validate_surface(box.vertices + noise, box.faces, "<noisy box>"))
     assert len(features.patches) == 6
     assert all(p.planar and p.cylinder is None for p in features.patches)
+
+
+def test_a_seven_sided_hole_is_a_full_turn(tmp_path):
+    """A hole of 7 facets (an OpenSCAD export's coarse circle), one patch at feature angle 55: its facet centres
+    are 51 deg apart round the axis but its vertices close the gaps, so it is a hole, not a fillet (an outside
+    test's coupling and belt clamp)."""
+    import trimesh
+
+    from engine.describe import solid_features
+
+    block = trimesh.creation.box([20.0, 20.0, 10.0])
+    bore = trimesh.creation.cylinder(radius=2.0, height=12.0, sections=7)
+    block.difference(bore, engine="manifold").export(str(tmp_path / "block.stl"))
+    _, _, features = solid_features(tmp_path / "block.stl", 55.0)
+    (hole,) = [p for p in features.patches if p.cylinder is not None]
+    assert hole.cylinder.concave and hole.cylinder.full_turn and hole.kinds == ["hole"]
