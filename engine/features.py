@@ -279,10 +279,57 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     return Features(
         corners=corners,
         curves=[c if c.sharp else _unzigzagged(c) for c in curves],
-        patches=patches,
+        patches=faceted_cylinders(mesh, patches, face_patch, sharp),
         face_patch=face_patch,
         feature_angle=feature_angle,
     )
+
+
+def faceted_cylinders(mesh, patches: list, face_patch: np.ndarray, sharp: np.ndarray) -> list:
+    """``patches`` with the ring's cylinder given to each planar patch of a ring of at least RING_FACETS that
+    closes a full turn round one axis, all its vertices on one circle: a coarse STL's polygon hole or boss (an
+    OpenSCAD export's 7- or 10-sided bolt holes, whose facets turn by more than the feature angle, so that each
+    is a patch of its own). They stay planar patches (charts, nodes and curves as before); the cylinder gives
+    them its kinds (a concave ring: 'hole') and radius. ``sharp`` marks the mesh's face adjacencies that
+    separate patches. Fewer sides make a polygon of its own (a hex socket)."""
+    pairs = mesh.face_adjacency[sharp]
+    a, b = face_patch[pairs[:, 0]], face_patch[pairs[:, 1]]
+    planar = np.array([p.planar for p in patches], bool)
+    ring = planar[a] & planar[b] & (a != b) & (mesh.face_adjacency_angles[sharp] <= np.radians(RING_TURN))
+    if ring.sum() < RING_FACETS:
+        return patches
+    ends = mesh.vertices[mesh.face_adjacency_edges[sharp][ring]]
+    direction = ends[:, 1] - ends[:, 0]
+    direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+    direction *= np.where(direction[np.arange(len(direction)), np.argmax(np.abs(direction), axis=1)] < 0, -1, 1)[
+        :, None
+    ]
+    close = cKDTree(direction).query_pairs(PARALLEL, output_type="ndarray")  # edges along one axis
+    count = len(direction)
+    _, along = csgraph.connected_components(
+        sparse.coo_matrix((np.ones(len(close)), (close[:, 0], close[:, 1])), shape=(count, count)), directed=False
+    )
+    a, b = a[ring], b[ring]
+    out = list(patches)
+    n = len(patches)
+    for axis_group in np.unique(along):
+        edges = along == axis_group
+        if edges.sum() < RING_FACETS:
+            continue
+        graph = sparse.coo_matrix((np.ones(int(edges.sum())), (a[edges], b[edges])), shape=(n, n))
+        _, component = csgraph.connected_components(graph, directed=False)
+        members_of = np.unique(np.concatenate([a[edges], b[edges]]))
+        for label in np.unique(component[members_of]):
+            members = members_of[component[members_of] == label]
+            if len(members) < RING_FACETS:
+                continue
+            faces = np.concatenate([patches[m].faces for m in members])
+            vertices = mesh.vertices[np.unique(mesh.faces[faces])]
+            cylinder = fit_cylinder(mesh.triangles_center[faces], mesh.face_normals[faces], vertices)
+            if cylinder is not None and cylinder.full_turn:
+                for m in members:
+                    out[m] = replace(patches[m], cylinder=cylinder)
+    return out
 
 
 def _unzigzagged(curve: Curve) -> Curve:
@@ -316,6 +363,9 @@ SMOOTHING = 4  # rounds of neighbour averaging of the normals' spread before the
 FOLD = 3.0  # a chart's border folds where it lays two border points this many times nearer than in space
 FOLD_SAMPLES = 4  # border points looked at per median border edge, ...
 MAX_FOLD_SAMPLES = 200_000  # ... and at most this many per chart
+RING_FACETS = 7  # planar patches round one axis, all vertices on one circle, that make a faceted cylinder ...
+RING_TURN = 60.0  # ... each turning at most this (degrees) from the next
+PARALLEL = 1e-3  # unit edge directions this close are one axis
 
 
 def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray, source: str) -> list[np.ndarray]:

@@ -141,3 +141,25 @@ def test_a_seven_sided_hole_is_a_full_turn(tmp_path):
     _, _, features = solid_features(tmp_path / "block.stl", 55.0)
     (hole,) = [p for p in features.patches if p.cylinder is not None]
     assert hole.cylinder.concave and hole.cylinder.full_turn and hole.kinds == ["hole"]
+
+
+def test_a_ten_sided_hole_is_a_hole_made_of_ten_planar_patches_and_a_hex_socket_is_not(tmp_path):
+    """At the default feature angle a 10-sided hole's facets (36 deg apart) are ten planar patches: they close a
+    full turn round one axis with every vertex on one circle, so each takes the ring's cylinder and is a hole of
+    radius 2 (an outside test's OpenSCAD endstop: its four bolt holes were not found, and the static-stress
+    recipe placed no hole pattern). A 6-sided socket is a polygon of its own."""
+    import trimesh
+
+    from engine.describe import solid_features
+
+    block = trimesh.creation.box([20.0, 20.0, 10.0])
+    bore = trimesh.creation.cylinder(radius=2.0, height=12.0, sections=10)
+    bore.apply_translation([-5.0, 0.0, 0.0])
+    socket = trimesh.creation.cylinder(radius=2.0, height=12.0, sections=6)
+    socket.apply_translation([5.0, 0.0, 0.0])
+    block.difference(bore, engine="manifold").difference(socket, engine="manifold").export(str(tmp_path / "b.stl"))
+    _, _, features = solid_features(tmp_path / "b.stl")
+    holes = [p for p in features.patches if "hole" in p.kinds]
+    assert len(holes) == 10 and all(p.planar for p in holes)
+    assert [p.cylinder.radius for p in holes] == pytest.approx([2.0] * 10)
+    assert all(p.centroid[0] < 0 for p in holes), "the hexagon's six faces are no hole"
