@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 
 SURFACE_FORMATS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".off": "off", ".glb": "glb"}
 TOUCH = 1e-9  # two shells closer than this times the model size touch
+FLIP_ROUNDS = 8  # rounds of swapping zero-area faces' long edges (needles next to needles wait a round)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -163,11 +164,7 @@ def validate_surface(
         )
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     mesh.merge_vertices()
-    degenerate = ~mesh.nondegenerate_faces(height=1e-12 * max(mesh.scale, 1e-300))
-    if degenerate.any():
-        mesh.update_faces(~degenerate)
-        mesh.remove_unreferenced_vertices()
-        notes.append(f"removed {int(degenerate.sum())} degenerate (zero-area) faces")
+    notes += _without_degenerate_faces(mesh)
     if len(mesh.faces) == 0:
         raise GeometryError(
             "the surface has no triangles of non-zero area", where=source, fix="export the solid's boundary"
@@ -189,6 +186,71 @@ def validate_surface(
     for note in notes:
         log.warning("%s: %s", source, note)
     return Geometry(mesh=mesh, source=source, face_body=shell_body[face_shell], notes=notes)
+
+
+def _without_degenerate_faces(mesh: trimesh.Trimesh) -> list[str]:
+    """Remove or fix ``mesh``'s zero-area faces in place; the notes saying what was done. A face with a repeated
+    vertex (two vertices merged) is removed; a needle whose third vertex lies on its longest edge (a T-junction
+    of an OpenSCAD or CAD export: removing it would open the surface) swaps that edge with the face across it,
+    in rounds (FLIP_ROUNDS) while needles meet needles; what is still degenerate is removed."""
+    notes = []
+    faces = mesh.faces
+    repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
+    height = 1e-12 * max(mesh.scale, 1e-300)
+    flipped = 0
+    faces = faces[~repeated]
+    for _ in range(FLIP_ROUNDS):
+        candidate = trimesh.Trimesh(mesh.vertices, faces, process=False)
+        needle = np.flatnonzero(~candidate.nondegenerate_faces(height=height))
+        if len(needle) == 0:
+            break
+        faces, done = _flip_needles(mesh.vertices, faces, needle)
+        flipped += done
+        if done == 0:
+            break
+    mesh.faces = faces
+    degenerate = ~mesh.nondegenerate_faces(height=height)
+    if degenerate.any():
+        mesh.update_faces(~degenerate)
+    mesh.remove_unreferenced_vertices()
+    removed = int(repeated.sum() + degenerate.sum())
+    if removed:
+        notes.append(f"removed {removed} degenerate (zero-area) faces")
+    if flipped:
+        notes.append(f"swapped the long edge of {flipped} zero-area faces whose third vertex lies on it (T-junctions)")
+    return notes
+
+
+def _flip_needles(vertices: np.ndarray, faces: np.ndarray, needle: np.ndarray) -> tuple[np.ndarray, int]:
+    """(faces, how many needles were fixed): each of the ``needle`` faces (a, b, c), its longest edge a -> b, and
+    the face (b, a, d) across it become (a, d, c) and (d, b, c); needles across from needles, or edges not
+    shared by exactly two faces, wait for a later round (at most one flip per face per round)."""
+    corners = vertices[faces[needle]]
+    length = np.linalg.norm(corners - np.roll(corners, -1, axis=1), axis=2)  # edge k: corner k -> k + 1
+    k = np.argmax(length, axis=1)
+    a, b, c = faces[needle, k], faces[needle, (k + 1) % 3], faces[needle, (k + 2) % 3]
+    directed = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    n = len(vertices)
+    keys = directed[:, 0] * n + directed[:, 1]
+    order = np.argsort(keys, kind="stable")
+    ordered, across = keys[order], b * n + a
+    at = np.clip(np.searchsorted(ordered, across), 0, len(keys) - 1)
+    single = np.searchsorted(ordered, across, side="right") - np.searchsorted(ordered, across) == 1
+    other = order[at] // 3
+    is_needle = np.zeros(len(faces), bool)
+    is_needle[needle] = True
+    ok = single & ~is_needle[other]
+    candidates = np.flatnonzero(ok)
+    _, first, count = np.unique(other[candidates], return_index=True, return_counts=True)
+    ok[:] = False
+    ok[candidates[first[count == 1]]] = True  # one flip per face across
+    slot = order[at] % 3  # the edge b -> a of the other face starts at its corner slot
+    d = faces[other, (slot + 2) % 3]
+    ok &= (d != c) & (d != a) & (d != b)
+    faces = faces.copy()
+    faces[needle[ok]] = np.column_stack([a, d, c])[ok]
+    faces[other[ok]] = np.column_stack([d, b, c])[ok]
+    return faces, int(ok.sum())
 
 
 def _check_closed(mesh: trimesh.Trimesh, source: str) -> None:

@@ -69,3 +69,21 @@ def test_cavity_counts_as_one_solid_and_keeps_inward_orientation():
     fixed = validate_surface(wrong.vertices, wrong.faces, "hollow box")
     assert fixed.volume == pytest.approx(1000 - 64)
     assert any("inside-out" in note for note in fixed.notes)
+
+
+def test_a_t_junction_needle_is_swapped_not_removed():
+    """A cube whose top triangle is split at the middle of an edge its side triangle does not split, closed by a
+    zero-area needle along that edge (as an OpenSCAD export has them): removing the needle would open the
+    surface ('edges bound a hole', an outside test's bar clamp); swapping its long edge keeps it closed."""
+    box = trimesh.creation.box([2.0, 2.0, 2.0])
+    vertices, faces = box.vertices.copy(), box.faces.copy()
+    top = int(np.flatnonzero(box.face_normals[:, 2] > 0.5)[0])
+    a, b, x = faces[top]
+    m = len(vertices)
+    vertices = np.vstack([vertices, (vertices[a] + vertices[b]) / 2])
+    faces = np.vstack([np.delete(faces, top, axis=0), [[a, m, x], [m, b, x], [a, b, m]]])
+    assert not trimesh.Trimesh(vertices, faces[:-1], process=False).is_watertight
+    geometry = validate_surface(vertices, faces, "needle.stl")
+    assert geometry.mesh.is_watertight and geometry.volume == pytest.approx(8.0)
+    assert any("T-junctions" in note for note in geometry.notes)
+    assert geometry.mesh.nondegenerate_faces(height=1e-9).all()
