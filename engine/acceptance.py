@@ -261,6 +261,11 @@ def cusps(features) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return at.reshape(-1, 3), curve[cusp], other[cusp], angle[cusp]
 
 
+def longest_edges(corners: np.ndarray) -> np.ndarray:
+    """(t,) the longest edge of each tetrahedron (``corners`` (t, 4, 3))."""
+    return np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
+
+
 def next_to_cusps(corners: np.ndarray, features, found: tuple) -> np.ndarray:
     """(t,) for each tetrahedron (``corners`` (t, 4, 3)) the index of the cusp in ``found`` (:func:`cusps`) it is
     next to, -1 if none: its centre is within one of its longest edges of both curves that leave the cusp's corner
@@ -274,7 +279,7 @@ def next_to_cusps(corners: np.ndarray, features, found: tuple) -> np.ndarray:
     if len(at) == 0 or len(corners) == 0:
         return which
     centre = corners.mean(axis=1)
-    longest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
+    longest = longest_edges(corners)
     for k in range(len(at)):
         near = np.flatnonzero((which < 0) & (np.linalg.norm(centre - at[k], axis=1) <= NEAR_CUSP * longest))
         if len(near):
@@ -300,7 +305,7 @@ def next_to_narrow_faces(corners: np.ndarray, geometry, features) -> tuple[np.nd
     if len(corners) == 0:
         return which, width
     centre = corners.mean(axis=1)
-    longest = np.linalg.norm(corners[:, :, None] - corners[:, None], axis=3).max(axis=(1, 2))
+    longest = longest_edges(corners)
     widths = facet_widths(geometry, features, float(longest.max()))
     narrow = np.flatnonzero(widths < NARROW * longest.max())
     if len(narrow) == 0:
