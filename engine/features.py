@@ -360,6 +360,7 @@ WIDE = 3.0  # a coplanar region this many times wider than the facets it bends i
 MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
 SEED_BAND = 0.25  # a halved piece's faces in this top and bottom share of their normals' spread stay apart
 SMOOTHING = 4  # rounds of neighbour averaging of the normals' spread before the seeds are chosen
+ISLAND = 3  # a cut's side keeps no component of fewer faces than this apart from its largest
 FOLD = 3.0  # a chart's border folds where it lays two border points this many times nearer than in space
 FOLD_SAMPLES = 4  # border points looked at per median border edge, ...
 MAX_FOLD_SAMPLES = 200_000  # ... and at most this many per chart
@@ -477,10 +478,30 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
             along = (along - along.min()) / max(np.ptp(along), 1e-300)
             source, sink = along > 1 - SEED_BAND, along < SEED_BAND
         side = _min_cut(len(piece), local[pairs[inner]], length[inner], source, sink)
+        side = _without_islands(side, local[pairs[inner]])
         for half in (piece[side], piece[~side]):
             labels = _components(len(mesh.faces), pairs[inner][np.isin(pairs[inner], half).all(axis=1)])
             todo += [(half[labels[half] == r], depth + 1) for r in np.unique(labels[half])]
     return sorted(pieces, key=lambda piece: int(piece.min()))
+
+
+def _without_islands(side: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """``side`` (a cut's side of each of a piece's faces, joined by ``pairs``, local indices) with every
+    component of a side but its largest that has fewer than ISLAND faces given to the other side, which
+    surrounds it. A minimum cut across a CAD tessellation's long facets left a single facet of a spring's
+    swept face on its own: a chart of one triangle between two cuts that, unzigzagged, ran along the same
+    edge (100 curve edges missing from the surface triangulation)."""
+    side = side.copy()
+    for half in (True, False):
+        members = np.flatnonzero(side == half)
+        inside = (side[pairs] == half).all(axis=1)
+        labels = _components(len(side), pairs[inside])[members]
+        names, sizes = np.unique(labels, return_counts=True)
+        if len(names) < 2:
+            continue
+        small = names[(sizes < ISLAND) & (names != names[np.argmax(sizes)])]
+        side[members[np.isin(labels, small)]] = not half
+    return side
 
 
 def _shared_edges(mesh, pairs: np.ndarray) -> np.ndarray:

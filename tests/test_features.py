@@ -163,3 +163,16 @@ def test_a_ten_sided_hole_is_a_hole_made_of_ten_planar_patches_and_a_hex_socket_
     assert len(holes) == 10 and all(p.planar for p in holes)
     assert [p.cylinder.radius for p in holes] == pytest.approx([2.0] * 10)
     assert all(p.centroid[0] < 0 for p in holes), "the hexagon's six faces are no hole"
+
+
+def test_a_cut_leaves_no_island_of_a_face_or_two_apart():
+    """A minimum cut's side with a stray face (the spring of an outside test: one facet between two cuts that ran
+    along the same edge once unzigzagged, and 100 curve edges missing from its surface triangulation) gives it to
+    the side round it; a side's largest component stays however small."""
+    from engine.features import _without_islands
+
+    chain = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5], [5, 6], [6, 7]])
+    side = np.array([True, True, True, False, True, False, False, False])
+    assert _without_islands(side, chain).tolist() == [True, True, True, False, False, False, False, False]
+    alone = np.array([True, False, False, False, False, False, False, False])
+    assert _without_islands(alone, chain).tolist() == alone.tolist()
