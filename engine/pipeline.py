@@ -380,7 +380,8 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
     with stage("exact", timings):
         mesh, moved, exact = on_exact_surfaces(mesh, geometry, features)
     log.info(
-        "exact surfaces: %d of %d patches and %d of %d curves lie on a plane, cylinder, sphere or cone; %d nodes moved "
+        "exact surfaces: %d of %d patches and %d of %d curves have one (a plane, cylinder, sphere, cone or torus, or "
+        "the CAD face or edge itself); %d nodes moved "
         "onto them, at most %.3g%s%s (%.2f s)",
         moved["exact_patches"],
         moved["patches"],
