@@ -31,12 +31,13 @@ from typing import NamedTuple
 import numpy as np
 
 from .levels import Level
-from .mesh import signed_volumes
+from .quality import tet_quality
 
 EXACT_TOLERANCE = 1e-6  # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
 ROUNDS = 8  # alternating projections onto the surfaces a curve borders
 FAITHFUL = 0.05  # x the local element size: how far the input's facets may lie from the surface nodes go onto
 SAME_SURFACE = 1e-4  # x the model size, and radians: two patches' fitted surfaces this close are one surface
+FLAT_AFTER_MOVE = 10.0  # deg: a tet the move onto the exact surfaces would leave flatter than this keeps its nodes
 CLOSER = 10.0  # a simpler surface that fits a face is taken over a closer one if its error is within this factor
 EXACT_FIT = 1e-6  # ... or below this x the tolerance (roundoff: every surface that holds the face fits it exactly)
 # barycentric points of a facet where its distance from the surface is sampled: centroid, edge midpoints, and
@@ -397,9 +398,9 @@ def faithful(surfaces: list, geometry, features, mesh) -> tuple[list, dict]:
 
 def on_exact_surfaces(mesh, geometry, features):
     """The mesh with its curve and patch nodes on their exact surfaces (module docstring); nodes of a tet
-    the move would leave with a non-positive volume stay where they were. Returns (mesh, stats, exact):
-    ``exact`` the surfaces used (those of :func:`fit_exact`, less the ones an input faceting strays from,
-    :func:`faithful`), for the stages after this one (the 10-node elements)."""
+    the move would leave with a non-positive volume, or flattened (:func:`_flattened`), stay where they were.
+    Returns (mesh, stats, exact): ``exact`` the surfaces used (those of :func:`fit_exact`, less the ones an
+    input faceting strays from, :func:`faithful`), for the stages after this one (the 10-node elements)."""
     surfaces = exact_surfaces(geometry, features)
     faithful_stats = {}
     if features.exact is None:  # an input faceting, not a CAD model's surfaces
@@ -415,7 +416,8 @@ def on_exact_surfaces(mesh, geometry, features):
                 mine = nodes[entity[nodes] == key]
                 points[mine] = onto_intersection(table[key], points[mine])
     kept = np.zeros(len(points), bool)
-    while (bad := signed_volumes(points, mesh.tets) <= 0).any():  # ends: the input mesh has none
+    before = tet_quality(mesh.points, mesh.tets).min_dihedral
+    while (bad := _flattened(points, mesh.tets, before)).any():  # ends: the input mesh's tets are as they were
         back = np.unique(mesh.tets[bad])
         points[back], kept[back] = mesh.points[back], True
     distance = np.linalg.norm(points - mesh.points, axis=1)
@@ -430,6 +432,14 @@ def on_exact_surfaces(mesh, geometry, features):
         **faithful_stats,
     }
     return dataclasses.replace(mesh, points=points), stats, exact
+
+
+def _flattened(points: np.ndarray, tets: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """(t,) whether each tet is not positive at ``points``, or flatter than FLAT_AFTER_MOVE degrees where its
+    minimum dihedral angle was ``before`` above that: four surface nodes of a spring's swept face, moved up to
+    0.12 onto it from its tessellation, made three tets of 1-3 deg, which the gate refused."""
+    quality = tet_quality(points, tets)
+    return (quality.volume <= 0) | ((quality.min_dihedral < FLAT_AFTER_MOVE) & (before >= FLAT_AFTER_MOVE))
 
 
 def _surface_or_curve(mesh, geometry, features) -> tuple[np.ndarray, np.ndarray]:

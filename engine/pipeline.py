@@ -389,7 +389,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         moved["curves"],
         moved["nodes_moved"],
         moved["largest_move"],
-        f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds"
+        f", {moved['nodes_kept_for_validity']} kept on the facets so that no tet folds or flattens"
         if moved["nodes_kept_for_validity"]
         else "",
         f"; {moved['patches_left_on_facets']} curved patches left on the input's facets (a coarse STL: its facets "

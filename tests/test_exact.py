@@ -228,3 +228,23 @@ def test_ten_node_elements_hold_the_exact_volume(kind, parameters):
     assert report_summary(result)["volume"] == pytest.approx(
         {"mesh": result.mesh.volume, "solid": result.geometry.volume, "exact": exact, "ten_node": exact}, rel=1e-4
     )
+
+
+def test_a_move_onto_the_exact_surface_that_flattens_a_tet_is_not_made():
+    """A tet whose node the move would bring within 1 deg of its opposite face's plane, or through it, is
+    flattened (its nodes stay on the facets: a swept spring's surface nodes made tets of 1-3 deg); a tet
+    already that flat before, and one the move leaves at 35 deg, are not."""
+    from engine.exact import _flattened
+    from engine.quality import tet_quality
+
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, 1]])
+    tets = np.array([[0, 1, 2, 3]])
+    before = tet_quality(points, tets).min_dihedral
+    assert before[0] > 30
+    lower = points.copy()
+    for height, flat in ((0.01, True), (-0.2, True), (0.8, False)):
+        lower[3, 2] = height
+        assert _flattened(lower, tets, before)[0] == flat, height
+    already = points.copy()
+    already[3, 2] = 0.01
+    assert not _flattened(already, tets, tet_quality(already, tets).min_dihedral)[0]
