@@ -340,7 +340,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 continue
             log.warning(
                 "%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "
-                "instead, where a closed cylinder or cone (a hole) is cut into charts and not recognised",
+                "instead, where a closed cylinder or cone (a hole) may be cut into charts and not recognised",
                 source,
                 error.what,
             )

@@ -367,7 +367,7 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
             except RuntimeError as error:  # the nodes do not make a mesh of this solid
                 raise _no_mesh(job, f"{len(packing)} nodes", error) from None
     log.info(
-        "meshing (%s): %d nodes, %d tetrahedra, volume %.6g (solid %.6g, %+.3f %%)%s (%.2f s)",
+        "meshing (%s): %d nodes, %d tetrahedra, volume %.6g (input surface %.6g, %+.3f %%)%s (%.2f s)",
         job.mesher,
         len(mesh.points),
         len(mesh.tets),
@@ -417,9 +417,10 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
     with stage("boundary", timings):
         boundary = boundary_report(mesh, geometry, sizing)
     there, back = boundary["hausdorff_input_to_mesh"], boundary["hausdorff_mesh_to_input"]
+    beyond = f" beyond the tessellation's own {geometry.chord:.3g} from the CAD faces" if geometry.chord else ""
     log.info(
         "boundary: %d triangles, %s, %d boundary edges, %d component(s); Hausdorff input -> mesh max %.4g "
-        "(%.3g h), mean %.4g; mesh -> input max %.4g (%.3g h), mean %.4g%s; area %+.3f %% of the input's, volume "
+        "(%.3g h%s), mean %.4g; mesh -> input max %.4g (%.3g h%s), mean %.4g; area %+.3f %% of the input's, volume "
         "%s; triangle quality min %.3f (%.2f s)",
         boundary["triangles"],
         "two-manifold" if boundary["two_manifold"] else "NOT two-manifold",
@@ -427,11 +428,12 @@ def run(job: Job, *, max_elements: float | None = None, write: bool = True, keep
         boundary["components"],
         there["max"],
         there["max_over_h"],
+        beyond,
         there["mean"],
         back["max"],
         back["max_over_h"],
+        beyond,
         back["mean"],
-        f" (x h: less the tessellation's sagitta {geometry.chord:.3g})" if geometry.chord else "",
         100 * (boundary["area"] / boundary["input_area"] - 1),
         volume_errors(boundary["volume"], geometry.volume, geometry.exact_volume),
         boundary["triangle_quality"]["min"],
