@@ -173,12 +173,14 @@ def check_mesh(
     low = np.flatnonzero(~(quality.min_dihedral >= tolerances.min_dihedral))
     if len(low):
         found = cusps(features)
-        cause = forced_flat(mesh.points[tets[low]], geometry, features, found)
-        excused = (cause[0] >= 0) | (cause[1] >= 0)
-        excused &= quality.min_dihedral[low] >= tolerances.cusp_min_dihedral
+        cusp, facet, width = forced_flat(mesh.points[tets[low]], geometry, features, found)
+        excused = ((cusp >= 0) | (facet >= 0)) & (quality.min_dihedral[low] >= tolerances.cusp_min_dihedral)
         failing = low[~excused] if not excused.all() else low
-        worst = int(failing[np.argmin(quality.min_dihedral[failing])])
-        clause = forced_flat_clause(mesh.points[tets[worst]], geometry, features, found)
+        first = int(np.flatnonzero(low == failing[np.argmin(quality.min_dihedral[failing])])[0])
+        worst = int(low[first])
+        clause = forced_flat_clause(
+            mesh.points[tets[worst]], geometry, features, found, (cusp[first], facet[first], width[first])
+        )
         line = (
             f"{len(failing)} tetrahedra have a dihedral angle below {tolerances.min_dihedral:g} deg"
             + (
@@ -321,24 +323,27 @@ def next_to_narrow_faces(corners: np.ndarray, geometry, features) -> tuple[np.nd
     return which, width
 
 
-def forced_flat(corners: np.ndarray, geometry, features, found: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """(cusp (t,), narrow facet (t,)): for each tetrahedron (``corners`` (t, 4, 3)) the cusp in ``found``
-    (:func:`cusps`) it is next to (:func:`next_to_cusps`) and the facet of a narrow face next to it
+def forced_flat(corners: np.ndarray, geometry, features, found: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cusp (t,), narrow facet (t,), its width (t,)): for each tetrahedron (``corners`` (t, 4, 3)) the cusp in
+    ``found`` (:func:`cusps`) it is next to (:func:`next_to_cusps`) and the facet of a narrow face next to it
     (:func:`next_to_narrow_faces`, looked for only where there is no cusp), -1 where none."""
     cusp = next_to_cusps(corners, features, found)
-    narrow = np.full(len(corners), -1)
+    narrow, width = np.full(len(corners), -1), np.full(len(corners), np.inf)
     alone = np.flatnonzero(cusp < 0)
     if len(alone):
-        narrow[alone] = next_to_narrow_faces(corners[alone], geometry, features)[0]
-    return cusp, narrow
+        narrow[alone], width[alone] = next_to_narrow_faces(corners[alone], geometry, features)
+    return cusp, narrow, width
 
 
-def forced_flat_clause(corners: np.ndarray, geometry, features, found: tuple) -> str:
+def forced_flat_clause(corners: np.ndarray, geometry, features, found: tuple, cause: tuple | None = None) -> str:
     """A clause naming the cusp (:func:`cusps`' ``found``) or the narrow face a tetrahedron (``corners`` (4, 3))
-    is next to (:func:`forced_flat`); '' if none."""
+    is next to; ``cause`` its (cusp, facet, width) from :func:`forced_flat`, found here when not given; '' if
+    none."""
     from .features import coordinates, describe
 
-    cusp = int(next_to_cusps(corners[None], features, found)[0])
+    cusp, facet, width = (
+        (c[0] for c in forced_flat(corners[None], geometry, features, found)) if cause is None else cause
+    )
     if cusp >= 0:
         at, curve, other, angle = found
         return (
@@ -346,10 +351,9 @@ def forced_flat_clause(corners: np.ndarray, geometry, features, found: tuple) ->
             f"corner at ({coordinates(at[cusp], float(np.abs(corners).max()))}) {angle[cusp]:.2g} deg apart, and "
             "the face between them is narrower than the elements there"
         )
-    facet, width = next_to_narrow_faces(corners[None], geometry, features)
-    if facet[0] >= 0:
-        patch = features.patches[int(features.face_patch[facet[0]])]
-        return f", next to {describe(patch)}, {width[0]:.3g} wide there: narrower than the elements"
+    if facet >= 0:
+        patch = features.patches[int(features.face_patch[facet])]
+        return f", next to {describe(patch)}, {width:.3g} wide there: narrower than the elements"
     return ""
 
 
