@@ -18,6 +18,7 @@ moves the mesh nodes and 10-node mid-edge nodes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import logging
 import re
@@ -57,6 +58,7 @@ MAX_SEEDS = 400_000  # ... at most this many points per CAD face or edge
 COARSE_SEEDS = 17  # parameter values per direction of the grid that measures the parameter lines' lengths
 NEWTON_STEPS = 12  # Gauss-Newton steps towards a closest point, ...
 NEWTON_TOLERANCE = 1e-11  # ... until a step moves the point less than this x the model size
+PARAMETRIZED = 256  # CAD faces and edges whose seed grids are kept (each up to MAX_SEEDS points)
 CHORD_SAMPLES = 20_000  # the longest facets whose distance from the CAD faces measures the tessellation's
 
 
@@ -100,14 +102,10 @@ class CadModel:
         return candidates[best, np.arange(len(points))]
 
 
-_PARAMETRIZED: dict = {}  # (model name, dim, tag) -> Parametrized, made once per entity
-
-
+@functools.lru_cache(maxsize=PARAMETRIZED)
 def _parametrized(name: str, model, dim: int, tag: int) -> Parametrized:
-    key = (name, dim, tag)
-    if key not in _PARAMETRIZED:
-        _PARAMETRIZED[key] = Parametrized.of(model, dim, tag)
-    return _PARAMETRIZED[key]
+    """The :class:`Parametrized` of an entity of the model ``name`` (``model``: Gmsh's, that model current)."""
+    return Parametrized.of(model, dim, tag)
 
 
 @dataclass(frozen=True)
@@ -133,36 +131,45 @@ class Parametrized:
 
         low, high = (np.asarray(b, float).reshape(dim) for b in model.getParametrizationBounds(dim, tag))
         lo, hi = np.reshape(model.getBoundingBox(-1, -1), (2, 3))
-        spacing = SEED_SPACING * float(np.linalg.norm(hi - lo))
+        size = float(np.linalg.norm(hi - lo))
 
         def grid(counts):
             axes = [np.linspace(low[k], high[k], int(counts[k])) for k in range(dim)]
-            return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim), axes
+            return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
 
         def points(parameters):
             return np.reshape(model.getValue(dim, tag, parameters.ravel()), (-1, 3))
 
-        coarse, _ = grid([COARSE_SEEDS] * dim)  # the lengths of the parameter lines, for the grid's counts
-        along = points(coarse).reshape([COARSE_SEEDS] * dim + [3])
+        along = points(grid([COARSE_SEEDS] * dim)).reshape([COARSE_SEEDS] * dim + [3])  # the parameter lines
         lengths = [float(np.linalg.norm(np.diff(along, axis=k), axis=-1).sum(axis=k).max()) for k in range(dim)]
-        counts = np.clip(np.ceil(np.array(lengths) / max(spacing, 1e-300)) + 1, COARSE_SEEDS, None)
+        counts = np.clip(np.ceil(np.array(lengths) / max(SEED_SPACING * size, 1e-300)) + 1, COARSE_SEEDS, None)
         counts = np.maximum(2, np.floor(counts * min(1.0, (MAX_SEEDS / counts.prod()) ** (1 / dim))))
-        seeds, _ = grid(counts)
+        seeds = grid(counts)
         middle = (low + high) / 2
         periodic = np.zeros(dim, bool)
         for k in range(dim):  # the two ends of a parameter line through the middle meet: periodic
             ends = np.tile(middle, (2, 1))
             ends[:, k] = low[k], high[k]
             ends = points(ends)
-            periodic[k] = np.linalg.norm(ends[0] - ends[1]) <= 1e-9 * spacing / SEED_SPACING
-        size = spacing / SEED_SPACING
+            periodic[k] = np.linalg.norm(ends[0] - ends[1]) <= 1e-9 * size
         return cls(dim, tag, low, high, periodic, seeds, cKDTree(points(seeds)), NEWTON_TOLERANCE * size)
+
+    @property
+    def period(self) -> np.ndarray:
+        """(dim,) the length of each parameter's range (1 where it is a point)."""
+        return np.where(self.high > self.low, self.high - self.low, 1.0)
+
+    def _wrapped(self, parameters: np.ndarray) -> np.ndarray:
+        """``parameters`` (k, dim) with the periodic ones taken into their period, the others clamped to their
+        bounds."""
+        low, high = self.low, self.high
+        return np.clip(np.where(self.periodic, low + np.mod(parameters - low, self.period), parameters), low, high)
 
     def closest(self, model, points: np.ndarray) -> np.ndarray:
         """(k, 3) the closest points to ``points`` (k, 3) on the entity."""
         dim, tag = self.dim, self.tag
         parameters = self.seeds[self.tree.query(points)[1]].copy()
-        period = np.where(self.high > self.low, self.high - self.low, 1.0)
+        period = self.period
         converged = np.zeros(len(points), bool)
         for _ in range(NEWTON_STEPS):
             active = np.flatnonzero(~converged)
@@ -171,25 +178,24 @@ class Parametrized:
             at = parameters[active]
             x = np.reshape(model.getValue(dim, tag, at.ravel()), (-1, 3))
             jacobian = np.reshape(model.getDerivative(dim, tag, at.ravel()), (-1, dim, 3))  # d x / d parameter
+            residual = points[active] - x
             normal = np.einsum("kid,kjd->kij", jacobian, jacobian)
             normal += 1e-12 * np.trace(normal, axis1=1, axis2=2)[:, None, None] * np.eye(dim) + 1e-300 * np.eye(dim)
-            step = np.linalg.solve(normal, np.einsum("kid,kd->ki", jacobian, points[active] - x)[..., None])[..., 0]
-            wrapped = np.where(self.periodic, self.low + np.mod(at + step - self.low, period), at + step)
-            new = np.clip(wrapped, self.low, self.high)
-            held = new != wrapped  # at a bound: the step along the other parameter alone (a face's edge)
+            step = np.linalg.solve(normal, np.einsum("kid,kd->ki", jacobian, residual)[..., None])[..., 0]
+            new = self._wrapped(at + step)
+            held = ~self.periodic & (new != at + step)  # at a bound: the other parameter steps alone (an edge)
             if dim == 2 and (one := held.sum(axis=1) == 1).any():
                 rows = np.flatnonzero(one)
                 free = np.argmin(held[rows], axis=1)
                 along = jacobian[rows, free]
-                alone = np.einsum("kd,kd->k", along, points[active][rows] - x[rows]) / np.maximum(
+                alone = np.einsum("kd,kd->k", along, residual[rows]) / np.maximum(
                     np.einsum("kd,kd->k", along, along), 1e-300
                 )
-                value = at[rows, free] + alone
-                value = np.where(
-                    self.periodic[free], self.low[free] + np.mod(value - self.low[free], period[free]), value
-                )
-                new[rows, free] = np.clip(value, self.low[free], self.high[free])
-            taken = np.where(self.periodic, step, new - at)  # a clamped step goes only as far as the bound
+                trial = new[rows]
+                trial[np.arange(len(rows)), free] = at[rows, free] + alone
+                new[rows] = self._wrapped(trial)
+            taken = new - at  # the step as taken (clamped), the shorter way round a period
+            taken -= np.where(self.periodic, period * np.round(taken / period), 0.0)
             moved = np.linalg.norm(np.einsum("ki,kid->kd", taken, jacobian), axis=1)
             parameters[active] = new
             converged[active[moved <= self.tolerance]] = True
@@ -658,12 +664,11 @@ def _chord(geometry: Geometry, features: Features) -> float:
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     sample = np.argsort(-longest, kind="stable")[:CHORD_SAMPLES]
     centres, patch = geometry.mesh.triangles_center[sample], features.face_patch[sample]
-    surfaces = features.exact[0] if features.exact else []
-    deviation = [
-        float(np.linalg.norm(surfaces[p].project(centres[patch == p]) - centres[patch == p], axis=1).max())
-        for p in np.unique(patch)
-        if p < len(surfaces) and surfaces[p] is not None
-    ]
+    deviation = []
+    for p in np.unique(patch):
+        if (surface := features.exact[0][p]) is not None:
+            at = centres[patch == p]
+            deviation.append(float(np.linalg.norm(surface.project(at) - at, axis=1).max()))
     return max([DEFLECTION * geometry.scale, *deviation])
 
 
