@@ -416,9 +416,10 @@ def on_exact_surfaces(mesh, geometry, features):
                 mine = nodes[entity[nodes] == key]
                 points[mine] = onto_intersection(table[key], points[mine])
     kept = np.zeros(len(points), bool)
-    before = tet_quality(mesh.points, mesh.tets).min_dihedral
-    while (bad := _flattened(points, mesh.tets, before)).any():  # ends: the input mesh's tets are as they were
-        back = np.unique(mesh.tets[bad])
+    touched = mesh.tets[np.any(points != mesh.points, axis=1)[mesh.tets].any(axis=1)]  # the others are as they were
+    before = tet_quality(mesh.points, touched).min_dihedral
+    while (bad := _flattened(points, touched, before)).any():  # ends: the input mesh's tets are as they were
+        back = np.unique(touched[bad])
         points[back], kept[back] = mesh.points[back], True
     distance = np.linalg.norm(points - mesh.points, axis=1)
     stats = {
