@@ -193,32 +193,32 @@ def _without_degenerate_faces(mesh: trimesh.Trimesh) -> list[str]:
     vertex (two vertices merged) is removed; a needle whose third vertex lies on its longest edge (a T-junction
     of an OpenSCAD or CAD export: removing it would open the surface) swaps that edge with the face across it,
     in rounds (FLIP_ROUNDS) while needles meet needles; what is still degenerate is removed."""
-    notes = []
     faces = mesh.faces
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
-    height = 1e-12 * max(mesh.scale, 1e-300)
-    flipped = 0
-    faces = faces[~repeated]
+    faces, flipped = faces[~repeated], 0
     for _ in range(FLIP_ROUNDS):
-        candidate = trimesh.Trimesh(mesh.vertices, faces, process=False)
-        needle = np.flatnonzero(~candidate.nondegenerate_faces(height=height))
+        needle = _degenerate(mesh.vertices, faces, mesh.scale)
         if len(needle) == 0:
             break
         faces, done = _flip_needles(mesh.vertices, faces, needle)
         flipped += done
         if done == 0:
             break
-    mesh.faces = faces
-    degenerate = ~mesh.nondegenerate_faces(height=height)
-    if degenerate.any():
-        mesh.update_faces(~degenerate)
+    else:
+        needle = _degenerate(mesh.vertices, faces, mesh.scale)
+    mesh.faces = np.delete(faces, needle, axis=0)
     mesh.remove_unreferenced_vertices()
-    removed = int(repeated.sum() + degenerate.sum())
-    if removed:
-        notes.append(f"removed {removed} degenerate (zero-area) faces")
+    removed = int(repeated.sum()) + len(needle)
+    notes = [f"removed {removed} degenerate (zero-area) faces"] if removed else []
     if flipped:
         notes.append(f"swapped the long edge of {flipped} zero-area faces whose third vertex lies on it (T-junctions)")
     return notes
+
+
+def _degenerate(vertices: np.ndarray, faces: np.ndarray, scale: float) -> np.ndarray:
+    """Indices of ``faces`` of zero area (no corner farther than 1e-12 x ``scale`` from the opposite side)."""
+    surface = trimesh.Trimesh(vertices, faces, process=False)
+    return np.flatnonzero(~surface.nondegenerate_faces(height=1e-12 * max(scale, 1e-300)))
 
 
 def _flip_needles(vertices: np.ndarray, faces: np.ndarray, needle: np.ndarray) -> tuple[np.ndarray, int]:
