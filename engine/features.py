@@ -301,9 +301,7 @@ def faceted_cylinders(mesh, patches: list, face_patch: np.ndarray, sharp: np.nda
     ends = mesh.vertices[mesh.face_adjacency_edges[sharp][ring]]
     direction = ends[:, 1] - ends[:, 0]
     direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
-    direction *= np.where(direction[np.arange(len(direction)), np.argmax(np.abs(direction), axis=1)] < 0, -1, 1)[
-        :, None
-    ]
+    direction *= np.sign(direction[np.arange(len(direction)), np.argmax(np.abs(direction), axis=1)])[:, None]
     close = cKDTree(direction).query_pairs(PARALLEL, output_type="ndarray")  # edges along one axis
     count = len(direction)
     _, along = csgraph.connected_components(
