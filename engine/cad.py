@@ -9,10 +9,10 @@ surface whose triangles know their CAD face. The
 own (adjacent faces of one cylinder, cone, sphere or torus, as exporters split periodic faces, make one
 patch), so every CAD edge between two faces is a curve. Patches and curves are then named from the file (its
 labels) or ``face-N`` / ``edge-N`` (N the CAD tag), get feature kinds from their face types (a concave torus
-is a fillet of its minor radius, a narrow cone a chamfer or, concave, a countersink; cylinders keep the
-shipped tests with the CAD's axis and radius), and each an exact surface or curve (analytic for planes,
-cylinders, cones, spheres and tori, else the CAD entity's closest point) onto which :mod:`engine.exact`
-moves the mesh nodes and 10-node mid-edge nodes.
+is a fillet of its minor radius, or a hole where it turns half round its tube: a bent bore; a narrow cone a
+chamfer or, concave, a countersink; cylinders keep the shipped tests with the CAD's axis and radius), and
+each an exact surface or curve (analytic for planes, cylinders, cones, spheres and tori, else the CAD entity's
+closest point) onto which :mod:`engine.exact` moves the mesh nodes and 10-node mid-edge nodes.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from scipy.sparse import csgraph
 
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
-from .features import Circle, Cylinder, Features, detect_features
+from .features import Circle, Cylinder, Features, detect_features, sweep
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -49,6 +49,8 @@ SLIVER = 1e-5  # x the model size: a face narrower than this on average is an ar
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
+HALF_TURN = 170.0  # degrees round its tube: a concave torus turning less is a fillet, one turning more a bent bore
+# or round groove, a 'hole' (the turn knowledge/features.yaml tells a cylindrical hole from a fillet by)
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
 FIT_TOLERANCE = 1e-4  # x the model size: a non-analytic face whose points lie this near one is that surface
@@ -434,7 +436,7 @@ class _CadFaces:
                 ),
                 self.surfaces[members[0]],
                 geometry,
-                whole=len(patch.faces) == np.count_nonzero(group == group[patch.faces[0]]),
+                np.flatnonzero(group == group[patch.faces[0]]),
             )
             for patch, members in zip(features.patches, patch_faces)
         ]
@@ -820,25 +822,28 @@ def _canonical(surface: Surface) -> np.ndarray:
     return p
 
 
-def _face_kinds(patch, surface: Surface, geometry: Geometry, whole: bool = True):
+def _face_kinds(patch, surface: Surface, geometry: Geometry, group: np.ndarray):
     """The patch with its CAD-given shape (the face's own or, for a non-analytic face, the analytic surface its
-    points fit): a cylinder's exact axis and radius (concave and full turn as its facets show, where they did
-    not fit one and the patch is the ``whole`` face, not a piece of a chart cut), a concave torus's or rolling
-    ball blend's fillet kind and tube circle, a narrow cone's chamfer or countersink kind."""
+    points fit): a cylinder's exact axis and radius (concave and sweep as its facets show, where they did not
+    fit one and the patch is the whole face, not a piece of a chart cut), a concave torus's fillet or hole kind
+    (by the turn round the tube of the whole face) and tube circle, a rolling ball blend's fillet kind and
+    circle, a narrow cone's chamfer or countersink kind. ``group``: the triangles of the faces the patch is of."""
     exact = surface.analytic
     normals = geometry.mesh.face_normals[patch.faces]
     centres = geometry.mesh.triangles_center[patch.faces]
-    if surface.form == "Cylinder" and (patch.cylinder is not None or whole):
-        cylinder = patch.cylinder or _cylinder(exact, centres, normals)
+    if surface.form == "Cylinder" and (patch.cylinder is not None or len(patch.faces) == len(group)):
+        cylinder = patch.cylinder or _cylinder(exact, centres, normals, patch.vertices)
         axis = exact.axis if exact.axis @ cylinder.axis > 0 else -exact.axis  # the fit's sign convention
         cylinder = dataclasses.replace(cylinder, point=exact.point, axis=axis, radius=float(exact.radius))
         return dataclasses.replace(patch, cylinder=cylinder)
     if surface.form == "Torus":
         tube = exact.tube_centre(centres)
-        fillet = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
+        concave = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
+        whole = geometry.mesh.vertices[np.unique(geometry.mesh.faces[group])]
+        kind = ("hole" if _tube_sweep(exact, whole) > HALF_TURN else "fillet",)
         return dataclasses.replace(
             patch,
-            kinds=[*patch.kinds, "fillet"] if fillet else patch.kinds,
+            kinds=[*patch.kinds, *kind] if concave else patch.kinds,
             circle=Circle(exact.centre, exact.axis, float(exact.minor)),
         )
     if surface.blend is not None:
@@ -860,19 +865,29 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, whole: bool = True)
     return patch
 
 
-def _cylinder(exact: CylinderSurface, centres: np.ndarray, normals: np.ndarray) -> Cylinder:
-    """The patch cylinder of triangles (``centres``, ``normals``) on ``exact``, concave when their normals point
-    to its axis and a full turn when they leave no gap of 30 degrees around it (as
+def _tube_sweep(exact, points: np.ndarray) -> float:
+    """The angle (degrees) round the tube of torus ``exact`` that ``points`` (k, 3) on it cover."""
+    tube = exact.tube_centre(points)
+    outward = tube - exact.centre
+    outward /= np.linalg.norm(outward, axis=1, keepdims=True)
+    rel = points - tube
+    section = np.column_stack([np.einsum("ij,ij->i", rel, outward), rel @ exact.axis, np.zeros(len(rel))])
+    return sweep(section, np.array([0.0, 0.0, 1.0]))
+
+
+def _cylinder(exact: CylinderSurface, centres: np.ndarray, normals: np.ndarray, vertices: np.ndarray) -> Cylinder:
+    """The patch cylinder of triangles (``centres``, ``normals``, their ``vertices``) on ``exact``, concave when
+    their normals point to its axis, its sweep the turn their centres and vertices cover (as
     :func:`engine.features.fit_cylinder` tells from the facets)."""
     axis = exact.axis if exact.axis[np.argmax(np.abs(exact.axis))] > 0 else -exact.axis
-    rel = centres - exact.point
-    radial = rel - np.outer(rel @ axis, axis)
-    u = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis))])
-    u /= np.linalg.norm(u)
-    angles = np.sort(np.arctan2(radial @ np.cross(axis, u), radial @ u))
-    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
-    concave = bool(np.mean(np.einsum("ij,ij->i", radial, normals)) < 0)
-    return Cylinder(exact.point, axis, float(exact.radius), concave, bool(gaps.max() < np.radians(30)))
+
+    def radial(points):
+        rel = points - exact.point
+        return rel - np.outer(rel @ axis, axis)
+
+    concave = bool(np.mean(np.einsum("ij,ij->i", radial(centres), normals)) < 0)
+    turn = sweep(np.vstack([radial(centres), radial(vertices)]), axis)
+    return Cylinder(exact.point, axis, float(exact.radius), concave, turn)
 
 
 def _curve_edges(

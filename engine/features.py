@@ -38,13 +38,20 @@ class Circle:
 
 @dataclass(frozen=True)
 class Cylinder:
-    """A patch that lies on a cylinder; ``concave`` when the material is outside it."""
+    """A patch that lies on a cylinder; ``concave`` when the material is outside it; ``sweep`` the angle round
+    the axis it covers, degrees (360 less the widest gap between its facets' centres and vertices): a hole's
+    wall 360, a keyed bore's about 330, a slot end's 180, a fillet's 180 less the angle its faces meet at."""
 
     point: np.ndarray
     axis: np.ndarray
     radius: float
     concave: bool
-    full_turn: bool
+    sweep: float
+
+    @property
+    def full_turn(self) -> bool:
+        """The cylinder goes all the way round (no gap of 30 degrees: a 7-sided hole's facets leave 26)."""
+        return self.sweep > 330.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -855,11 +862,18 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
     concave = bool(np.mean(np.einsum("ij,ij->i", radial, face_normals)) < 0)
     around = np.vstack([radial, vertices - centre])  # a 7-sided hole's facet centres are 51 deg apart, with its
     around -= np.outer(around @ axis, axis)  # vertices 26: a full turn (it was a 'fillet' at feature angle 55)
-    angles = np.sort(np.arctan2(around @ np.cross(axis, _any_perpendicular(axis)), around @ _any_perpendicular(axis)))
-    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
     if axis[np.argmax(np.abs(axis))] < 0:
         axis = -axis
-    return Cylinder(centre, axis, radius, concave, bool(gaps.max() < np.radians(30)))
+    return Cylinder(centre, axis, radius, concave, sweep(around, axis))
+
+
+def sweep(radial: np.ndarray, axis: np.ndarray) -> float:
+    """The angle (degrees) round ``axis`` that directions ``radial`` (k, 3), perpendicular to it, cover: 360 less
+    the widest gap between them."""
+    u = _any_perpendicular(axis)
+    angles = np.sort(np.arctan2(radial @ np.cross(axis, u), radial @ u))
+    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
+    return float(360.0 - np.degrees(gaps.max()))
 
 
 def _cylinder_axis(vertices: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -942,6 +956,9 @@ def _passes(feature, test: str, value) -> bool:
         cylinder = feature.cylinder
         actual = cylinder is not None if test == "cylindrical" else bool(cylinder and getattr(cylinder, test))
         return actual == value
+    if test in ("sweep_above", "sweep_below"):
+        turn = feature.cylinder.sweep if feature.cylinder is not None else None
+        return turn is not None and (turn > value if test == "sweep_above" else turn < value)
     return bool(getattr(feature, test)) == value
 
 

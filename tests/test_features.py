@@ -176,3 +176,65 @@ def test_a_cut_leaves_no_island_of_a_face_or_two_apart():
     assert _without_islands(side, chain).tolist() == [True, True, True, False, False, False, False, False]
     alone = np.array([True, False, False, False, False, False, False, False])
     assert _without_islands(alone, chain).tolist() == alone.tolist()
+
+
+def _keyed_slotted_bracket(occ):
+    """An L bracket (base 80 x 50 x 10, wall 10 thick and 20 high) whose inner corner is a fillet of radius 3,
+    with a slot 8 wide (two half-cylinder ends of radius 4) and a bore of radius 6 with a keyway 3 x 2 in the
+    base."""
+    base = occ.fuse([(3, occ.addBox(0, 0, 0, 80, 50, 10))], [(3, occ.addBox(0, 40, 10, 80, 10, 20))])[0][0][1]
+    occ.synchronize()
+    corner = [
+        c for _, c in occ.getEntities(1) if np.allclose(occ.getBoundingBox(1, c), [0, 40, 10, 80, 40, 10], atol=1e-6)
+    ]
+    base = occ.fillet([base], corner, [3.0])[0][1]
+    slot = occ.fuse(
+        [(3, occ.addBox(15, 16, -1, 20, 8, 12))],
+        [(3, occ.addCylinder(15, 20, -1, 0, 0, 12, 4)), (3, occ.addCylinder(35, 20, -1, 0, 0, 12, 4))],
+    )[0]
+    keyed = occ.fuse([(3, occ.addCylinder(60, 20, -1, 0, 0, 12, 6))], [(3, occ.addBox(60, 18.5, -1, 8, 3, 12))])[0]
+    occ.cut([(3, base)], slot + keyed)
+
+
+@pytest.mark.parametrize("source", ["step", "stl"])
+def test_a_keyed_bore_and_a_slot_end_are_holes_and_a_fillet_is_not(source, tmp_path):
+    """A concave cylinder round half a turn or more is a hole's wall (a keyed bore's 330 degrees, a slot end's
+    180), one round less a fillet (180 less the angle its faces meet at): an outside test's gear bore with a
+    keyway and a sheet bracket's slot ends were 'fillet', so `recipe: static-stress` refined neither."""
+    import gmsh
+
+    from engine.describe import solid_features
+
+    path = tmp_path / f"bracket.{source}"
+    options = {"Mesh.MeshSizeFromCurvature": 24, "Mesh.MeshSizeMax": 4.0}
+    with gmsh_model("test-keyed-slotted", options) as occ:
+        _keyed_slotted_bracket(occ)
+        occ.synchronize()
+        if source == "stl":
+            gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    _, _, features = solid_features(path)
+    kinds = sorted((kind, round(p.cylinder.radius, 2)) for p in features.patches if p.cylinder for kind in p.kinds)
+    assert kinds == [("fillet", 3.0), ("hole", 4.0), ("hole", 4.0), ("hole", 6.0)]
+    (bore,) = [p for p in features.patches if p.cylinder and p.cylinder.radius > 5]
+    assert 300 < bore.cylinder.sweep < 345
+
+
+def test_a_bent_pipe_s_bore_is_a_hole_and_its_outside_no_fillet(tmp_path):
+    """A concave torus turning all the way round its tube is a bent bore, a 'hole' of the tube's radius; a
+    fillet's torus turns a quarter (an outside test's pipe elbow bore was a 'fillet')."""
+    import math
+
+    import gmsh
+
+    from engine.describe import solid_features
+
+    path = tmp_path / "bend.step"
+    with gmsh_model("test-bent-pipe") as occ:
+        outer = occ.addTorus(0, 0, 0, 30, 8, angle=math.pi / 2)
+        occ.cut([(3, outer)], [(3, occ.addTorus(0, 0, 0, 30, 5))])
+        occ.synchronize()
+        gmsh.write(str(path))
+    _, _, features = solid_features(path)
+    tori = {(*p.names, *p.kinds, round(p.circle.radius, 6)) for p in features.patches if p.circle is not None}
+    assert tori == {("face-1", 8.0), ("face-4", "hole", 5.0)}  # each torus is cut into charts: every piece alike

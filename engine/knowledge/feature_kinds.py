@@ -12,9 +12,14 @@ from .common import OVERRIDES, _err
 
 FEATURE_TESTS = {
     "curve": ("closed", "circular", "convex", "sharp", "on_surface", "dihedral_above", "dihedral_below", "named"),
-    "patch": ("planar", "cylindrical", "concave", "full_turn", "named"),
+    "patch": ("planar", "cylindrical", "concave", "full_turn", "sweep_above", "sweep_below", "named"),
 }
-ANGLE_TESTS = ("dihedral_above", "dihedral_below")  # take an angle in degrees; "named" a name; the rest true/false
+ANGLE_TESTS = {  # take an angle in degrees up to the bound; "named" a name; the rest true/false
+    "dihedral_above": 180,
+    "dihedral_below": 180,
+    "sweep_above": 360,
+    "sweep_below": 360,
+}
 
 
 @dataclass
@@ -57,11 +62,13 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
                     f"tests for a {k['of']}: {', '.join(allowed)}",
                 )
             if test in ANGLE_TESTS:
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 180:
+                bound = ANGLE_TESTS[test]
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= bound:
+                    meaning = "the angle between the faces' normals" if bound == 180 else "the turn round the axis"
                     raise _err(
-                        f"test '{test}' takes an angle in degrees from 0 to 180, got {value!r}",
+                        f"test '{test}' takes an angle in degrees from 0 to {bound}, got {value!r}",
                         when.where(test),
-                        f"e.g. '{test}: 60' (the angle between the faces' normals)",
+                        f"e.g. '{test}: {60 if bound == 180 else 170}' ({meaning})",
                     )
             elif not isinstance(value, str if test == "named" else bool):
                 raise _err(
@@ -69,13 +76,14 @@ def load_feature_kinds(raw: Located, source: str) -> dict[str, FeatureKind]:
                     when.where(test),
                     f"e.g. '{test}: {'crack-front' if test == 'named' else 'true'}'",
                 )
-        if set(ANGLE_TESTS) <= set(when) and when["dihedral_above"] >= when["dihedral_below"]:
-            raise _err(
-                f"no curve passes dihedral_above: {when['dihedral_above']} and dihedral_below: "
-                f"{when['dihedral_below']}",
-                when.where("dihedral_below"),
-                "make dihedral_above the smaller",
-            )
+        for angle in ("dihedral", "sweep"):
+            above, below = f"{angle}_above", f"{angle}_below"
+            if {above, below} <= set(when) and when[above] >= when[below]:
+                raise _err(
+                    f"no {k['of']} passes {above}: {when[above]} and {below}: {when[below]}",
+                    when.where(below),
+                    f"make {above} the smaller",
+                )
         kinds[str(name)] = FeatureKind(str(name), k["of"], dict(body["when"]), k["doc"], raw["kinds"].where(name))
     del spec
     return kinds

@@ -500,14 +500,14 @@ class PatchChart:
             e1 /= np.linalg.norm(e1)
             self.kind, self.cylinder, self.e1, self.e2 = "cylinder", c, e1, np.cross(c.axis, e1)
             self.sign = -1.0 if c.concave else 1.0  # outward normal -e_r on a concave patch: mirror
-            self.middle = -np.pi  # the seam's angle
-            if c.full_turn:
-                self.turn = 2 * np.pi * c.radius
-            else:  # the largest empty sector of the patch goes to the seam
-                angles = np.sort(self._angle(self.vertices))
-                gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
-                k = int(np.argmax(gaps))
-                self.middle = angles[k] + gaps[k] / 2
+            angle = self._angle(self.vertices)
+            ordered = np.sort(angle)
+            gaps = np.diff(np.concatenate([ordered, ordered[:1] + 2 * np.pi]))
+            k = int(np.argmax(gaps))
+            self.middle = ordered[k] + gaps[k] / 2  # the seam's angle: in the largest empty sector of the patch, ...
+            across = np.angle(np.exp(1j * (angle[self.faces] - self.middle - np.pi)))
+            if (np.ptp(across, axis=1) > np.pi).any():  # ... unless a triangle crosses it: the patch goes round
+                self.turn, self.middle = 2 * np.pi * c.radius, -np.pi  # (a keyed bore's 330 degrees does not)
         else:
             self.kind = "conformal"
             self.vertex_uv = self._conformal_map(patch, geometry.source)
