@@ -429,3 +429,21 @@ def test_a_face_a_micrometre_wide_is_healed_away(step_files, tmp_path):
     assert len(features.patches) == 7 and geometry.exact_volume == pytest.approx(volume, rel=1e-6)
     result = run(_job(path, tmp_path, size=2.0))
     assert result.quality["min_dihedral"]["min"] > 15
+
+
+def test_a_cad_volume_its_tessellation_disagrees_with_is_not_reported_as_exact(step_files, caplog, monkeypatch):
+    """OpenCASCADE's volume of a solid is the exact one only where its tessellation agrees, within what its
+    chords leave out: a lofted blade's was 1.5 % low (every tessellation and mesh agreed to 0.03 %), and the
+    report gave the meshes +1.5 % of 'the exact solid'. Here its volume is made 1 % high: not reported, and
+    warned of; the true one is kept."""
+    import gmsh
+
+    path, volume = step_files["box_with_holes"]
+    _, geometry, _ = solid_features(path)
+    assert geometry.exact_volume == pytest.approx(volume, rel=1e-9)
+    assert abs(geometry.volume / volume - 1) > 1e-5, "the holes' chords leave some out (else this tests little)"
+    mass = gmsh.model.occ.getMass
+    monkeypatch.setattr(gmsh.model.occ, "getMass", lambda dim, tag: mass(dim, tag) * (1.01 if dim == 3 else 1))
+    _, geometry, _ = solid_features(path)
+    assert geometry.exact_volume is None
+    assert "not reported as the exact volume" in caplog.text

@@ -333,5 +333,5 @@ def test_the_tessellation_s_chord_is_how_far_its_facets_stray_from_the_cad_faces
         )
     assert geometry.chord >= cad.DEFLECTION * geometry.scale
     monkeypatch.setattr(cad, "DEFLECTION", 0.0)
-    measured = cad._chord(geometry, features)
+    measured, _ = cad._chord(geometry, features)
     assert 0 < float(distance.max()) * (1 - 1e-6) <= measured <= geometry.chord
