@@ -24,6 +24,7 @@ from .geometry import Geometry
 
 CIRCLE_TOLERANCE = 2e-3  # max radial deviation / radius for a curve to count as a circle
 TILTED_NORMALS = 0.1  # a cylinder's facet normals: third singular value / first (Gmsh's STLs: 1.3e-2 to 4.7e-2)
+AXIS_POINTS = 2000  # at most this many of a patch's vertices (every k-th) fit a cylinder's axis
 FLAT = 1e-7  # x the model size: a patch whose vertices all lie this near its mean plane is a plane (a CAD
 # tessellation's plane faces: 1e-9 to 1e-8, the coordinates' precision; at 1e-9 an outside test's bracket's
 # sides were "cylinders" of radius 1.8e8 and so concave fillets)
@@ -884,6 +885,7 @@ def _cylinder_axis(vertices: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
     u = _any_perpendicular(axis)
     v = np.cross(axis, u)
+    vertices = vertices[:: -(-len(vertices) // AXIS_POINTS)]
     x = vertices - vertices.mean(axis=0)
 
     def direction(p):
