@@ -447,3 +447,23 @@ def test_a_cad_volume_its_tessellation_disagrees_with_is_not_reported_as_exact(s
     _, geometry, _ = solid_features(path)
     assert geometry.exact_volume is None
     assert "not reported as the exact volume" in caplog.text
+
+
+def test_a_piece_of_a_freeform_face_is_no_cylinder_however_its_facets_fit_one(tmp_path):
+    """A CAD face's kinds come from the face: a chart piece of a B-spline face that fits no cylinder as a whole
+    keeps no cylinder its few facets fit (a lofted blade's scraps of 0.01 mm2 were 'fillet's of radius 1.7 to
+    3.5), while the whole face keeps its facets' cylinder."""
+    import trimesh
+
+    from engine.cad import Surface, _face_kinds
+
+    block = trimesh.creation.box([20.0, 20.0, 10.0]).difference(
+        trimesh.creation.cylinder(radius=4.0, height=12.0, sections=64), engine="manifold"
+    )
+    block.export(tmp_path / "block.stl")
+    _, geometry, features = solid_features(tmp_path / "block.stl")
+    (wall,) = [p for p in features.patches if p.cylinder is not None]
+    freeform = Surface("BSpline surface", np.zeros(0), None)
+    piece = _face_kinds(wall, freeform, geometry, np.arange(len(geometry.mesh.faces)))
+    whole = _face_kinds(wall, freeform, geometry, wall.faces)
+    assert piece.cylinder is None and whole.cylinder is wall.cylinder
