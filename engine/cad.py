@@ -872,8 +872,8 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, group: np.ndarray):
     if surface.form == "Torus":
         tube = exact.tube_centre(centres)
         concave = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
-        whole = geometry.mesh.vertices[np.unique(geometry.mesh.faces[group])]
-        kind = ("hole" if _tube_sweep(exact, whole) > HALF_TURN else "fillet",)
+        face_points = geometry.mesh.vertices[np.unique(geometry.mesh.faces[group])]
+        kind = ("hole" if _tube_sweep(exact, face_points) > HALF_TURN else "fillet",)
         return dataclasses.replace(
             patch,
             kinds=[*patch.kinds, *kind] if concave else patch.kinds,

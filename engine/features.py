@@ -872,9 +872,16 @@ def sweep(radial: np.ndarray, axis: np.ndarray) -> float:
     """The angle (degrees) round ``axis`` that directions ``radial`` (k, 3), perpendicular to it, cover: 360 less
     the widest gap between them."""
     u = _any_perpendicular(axis)
-    angles = np.sort(np.arctan2(radial @ np.cross(axis, u), radial @ u))
-    gaps = np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi]))
-    return float(360.0 - np.degrees(gaps.max()))
+    _, gap = widest_gap(np.arctan2(radial @ np.cross(axis, u), radial @ u))
+    return float(360.0 - np.degrees(gap))
+
+
+def widest_gap(angles: np.ndarray) -> tuple[float, float]:
+    """The start and the width (radians) of the widest empty sector between ``angles`` (k,) round a circle."""
+    ordered = np.sort(angles)
+    gaps = np.diff(np.concatenate([ordered, ordered[:1] + 2 * np.pi]))
+    k = int(np.argmax(gaps))
+    return float(ordered[k]), float(gaps[k])
 
 
 def _cylinder_axis(vertices: np.ndarray, axis: np.ndarray) -> np.ndarray:

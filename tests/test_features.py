@@ -238,3 +238,31 @@ def test_a_bent_pipe_s_bore_is_a_hole_and_its_outside_no_fillet(tmp_path):
     _, _, features = solid_features(path)
     tori = {(*p.names, *p.kinds, round(p.circle.radius, 6)) for p in features.patches if p.circle is not None}
     assert tori == {("face-1", 8.0), ("face-4", "hole", 5.0)}  # each torus is cut into charts: every piece alike
+
+
+def test_a_keyed_bore_is_unrolled_open_and_a_hole_wall_round(tmp_path):
+    """The cylinder chart is periodic only where a triangle crosses the seam put in the patch's widest empty
+    sector: a keyed bore (330 degrees, its keyway's gap under the 30 of full_turn) unrolls open, a hole wall
+    round."""
+    import gmsh
+    import trimesh
+
+    from engine.describe import solid_features
+    from engine.meshing.surface import PatchChart
+
+    path = tmp_path / "bracket.stl"
+    with gmsh_model("test-keyed-chart", {"Mesh.MeshSizeFromCurvature": 24, "Mesh.MeshSizeMax": 4.0}) as occ:
+        _keyed_slotted_bracket(occ)
+        occ.synchronize()
+        gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    _, geometry, features = solid_features(path)
+    (bore,) = [p for p in features.patches if p.cylinder and p.cylinder.radius > 5]
+    assert bore.cylinder.full_turn and PatchChart(bore, geometry).turn is None
+    block = trimesh.creation.box([20.0, 20.0, 10.0])
+    block.difference(trimesh.creation.cylinder(radius=4.0, height=12.0, sections=64), engine="manifold").export(
+        tmp_path / "block.stl"
+    )
+    _, geometry, features = solid_features(tmp_path / "block.stl")
+    (wall,) = [p for p in features.patches if p.cylinder is not None]
+    assert PatchChart(wall, geometry).turn == pytest.approx(2 * np.pi * 4.0, rel=1e-3)

@@ -23,7 +23,7 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
-from ..features import conformal_map, coordinates, curve_sides, describe
+from ..features import conformal_map, coordinates, curve_sides, describe, widest_gap
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
@@ -501,10 +501,8 @@ class PatchChart:
             self.kind, self.cylinder, self.e1, self.e2 = "cylinder", c, e1, np.cross(c.axis, e1)
             self.sign = -1.0 if c.concave else 1.0  # outward normal -e_r on a concave patch: mirror
             angle = self._angle(self.vertices)
-            ordered = np.sort(angle)
-            gaps = np.diff(np.concatenate([ordered, ordered[:1] + 2 * np.pi]))
-            k = int(np.argmax(gaps))
-            self.middle = ordered[k] + gaps[k] / 2  # the seam's angle: in the largest empty sector of the patch, ...
+            start, gap = widest_gap(angle)
+            self.middle = start + gap / 2  # the seam's angle: in the widest empty sector of the patch, ...
             across = np.angle(np.exp(1j * (angle[self.faces] - self.middle - np.pi)))
             if (np.ptp(across, axis=1) > np.pi).any():  # ... unless a triangle crosses it: the patch goes round
                 self.turn, self.middle = 2 * np.pi * c.radius, -np.pi  # (a keyed bore's 330 degrees does not)
