@@ -346,7 +346,14 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
             if mesher:
                 raise
             if attempt == 0:
-                log.info("%s: OpenCASCADE's tessellation is not a valid solid (%s): tried again", source, error.what)
+                log.info(
+                    "%s: OpenCASCADE's tessellation at %g degrees a facet is no valid solid (%s): tessellating "
+                    "again at %g degrees",
+                    source,
+                    TURN_ANGLE,
+                    error.what,
+                    RETRY_TURN,
+                )
                 continue
             log.warning(
                 "%s: OpenCASCADE's tessellation is not a valid solid (%s): the faces are meshed by Gmsh "

@@ -578,14 +578,20 @@ def _end(code: int | None) -> None:
     os._exit(int(code or 0))  # a command returning None: 0, as sys.exit(None)
 
 
+class _LevelFormatter(logging.Formatter):
+    """Log lines as they are, a warning's marked 'warning: ' so it stands out of the stages' lines."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = super().format(record)
+        return f"warning: {text}" if record.levelno == logging.WARNING else text
+
+
 def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO,
-        format="%(message)s",
-        stream=sys.stderr,
-    )
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_LevelFormatter("%(message)s"))
+    logging.basicConfig(level=logging.WARNING if getattr(args, "quiet", False) else logging.INFO, handlers=[handler])
     try:
         return args.run(args)
     except FuzzymeshError as error:

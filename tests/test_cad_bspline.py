@@ -264,7 +264,7 @@ def test_a_folded_tessellation_is_made_again(step_files, tmp_path, caplog):
     caplog.set_level(logging.INFO, logger="engine.cad")
     path, cad_volume = step_files["freeform_cap"]
     _, _, features = solid_features(path)
-    assert "edges inside CAD faces turn by more than 30 degrees" in caplog.text and "tried again" in caplog.text
+    assert "edges inside CAD faces turn by more than 30 degrees" in caplog.text and "tessellating again" in caplog.text
     assert "meshed by Gmsh" not in caplog.text
     names = [p.names[0] for p in features.patches]
     assert len(names) == len(set(names)) == 10
