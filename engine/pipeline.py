@@ -36,11 +36,12 @@ from .quality import boundary_report, size_conformity, tet_quality
 from .recombine import recombine
 from .report import report_summary, report_targets, volume_errors
 from .shapes import build_shape
-from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit
+from .sizing import GRADED_THRESHOLD, SizingField, bind, check_element_limit, pattern_shares
 
 log = logging.getLogger("fuzzymesh")
 
 SIZE_FROM_SCALE = 40.0  # default global size = model size (bounding-box diagonal) / this
+LARGE = 1e6  # expected tetrahedra from which the sizing line names the patterns that size most of them
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -221,6 +222,12 @@ class Prepared(NamedTuple):
     sizing: SizingField
 
 
+def _drivers(sizing) -> str:
+    """', most sized by PATTERN (S %), ...' for the patterns that size a tenth or more of the expected elements."""
+    shares = [f"{name} ({100 * share:.0f} %)" for name, share in pattern_shares(sizing).items() if share >= 0.1]
+    return f", most sized by {', '.join(shares)}" if shares else ""
+
+
 def prepare(job: Job, max_elements: float | None = None, timings: dict | None = None) -> Prepared:
     """The job's knowledge (loaded and checked against the job), geometry, features and sizing field, logged
     with their times in ``timings``; refuses a sizing needing more than ``max_elements`` tetrahedra (None:
@@ -250,13 +257,14 @@ def prepare(job: Job, max_elements: float | None = None, timings: dict | None = 
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
     log.info(
-        "sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected (%.2f s)",
+        "sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected%s (%.2f s)",
         len(sizing.placed),
         ", ".join(p.id for p in sizing.placed),
         sizing.global_size,
         sizing.h_min,
         sizing.h_max,
         expected,
+        _drivers(sizing) if expected > LARGE else "",
         timings["sizing"],
     )
     return Prepared(kb, geometry, features, sizing)

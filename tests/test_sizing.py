@@ -160,3 +160,31 @@ def test_the_fast_path_equals_the_audited_size():
     audit = sizing.evaluate(points)
     assert (sizing._graded(points) <= audit.raw * (1 + 1e-12)).all()
     assert np.allclose(sizing(points), audit.h, rtol=1e-12)
+
+
+def test_the_patterns_that_size_most_elements_are_named_before_packing(monkeypatch, caplog):
+    """Before packing, a large mesh's sizing line names the patterns that set the size of a tenth or more of its
+    expected elements (the audit's 'sized by', estimated): an outside test's enclosure under static-stress was
+    3.04M tets, 70 % of them on four screw pilot holes, which it learnt only from the audit after 160 s. The
+    shares are those of the volume's elements, largest first, and sum to at most 1; a hole pattern with a near
+    size of a twentieth of the radius sizes more of them than one of an eighth."""
+    import logging
+
+    from engine import pipeline
+    from engine.sizing import pattern_shares
+
+    def shares(near):
+        hole = {"pattern": "hole", "every": "hole", "parameters": {"near": near}}
+        _, sizing = sizing_for({"geometry": {"shape": "plate_with_hole"}, "size": 12, "place": [hole]})
+        return pattern_shares(sizing)
+
+    coarse, fine = shares(0.125), shares(0.05)
+    assert list(coarse.values()) == sorted(coarse.values(), reverse=True) and sum(coarse.values()) <= 1 + 1e-9
+    assert fine["hole"] > coarse["hole"] > 0
+    monkeypatch.setattr(pipeline, "LARGE", 0)
+    with caplog.at_level(logging.INFO, logger="fuzzymesh"):
+        pipeline.prepare(
+            job_from_dict({"geometry": {"shape": "plate_with_hole"}, "size": 12, "recipe": "static-stress"})
+        )
+    (line,) = [r.getMessage() for r in caplog.records if r.getMessage().startswith("sizing:")]
+    assert re.search(r"tetrahedra expected, most sized by [a-z-]+ \(\d+ %\)", line)

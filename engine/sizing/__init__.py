@@ -29,6 +29,7 @@ from .counts import (
     TETS_PER_NODE,
     check_element_limit,
     estimate_counts,
+    pattern_shares,
     stratified_points,
 )
 from .field import GRADED_THRESHOLD, GRID_NODES, SizingAudit, SizingField
@@ -42,6 +43,7 @@ __all__ = [
     "estimate_counts",
     "stratified_points",
     "check_element_limit",
+    "pattern_shares",
     "GRID_NODES",
     "SAMPLES_PER_NEAR",
     "TETS_PER_NODE",

@@ -82,6 +82,31 @@ def default_element_limit() -> tuple[float, str]:
     return float(MAX_ELEMENTS), "the default"
 
 
+def pattern_shares(sizing, samples: int = 1 << 15, seed: int = 0) -> dict[str, float]:
+    """{pattern: share} of the expected elements in the volume (its h^-3, sampled as :func:`estimate_counts`
+    does) where a placement of the pattern wins the dominance and so sets the size, largest first: the audit's
+    'sized by', before packing."""
+    evaluation, density = _sampled(sizing, samples, seed)
+    if evaluation is None:
+        return {}
+    won = evaluation.winner >= 0
+    names = np.array([placed.placement.pattern for placed in sizing.placed] or [""])
+    pattern, owner = np.unique(names[evaluation.winner[won]], return_inverse=True)
+    shares = np.bincount(owner, density[won], minlength=len(pattern)) / density.sum()
+    return {str(pattern[k]): float(shares[k]) for k in np.argsort(-shares, kind="stable")}
+
+
+def _sampled(sizing, samples: int, seed: int):
+    """(the sizing's evaluation, h^-3) at stratified points inside the solid, or (None, None) where none is."""
+    geometry = sizing.geometry
+    points = stratified_points(*geometry.bounds, samples, np.random.default_rng(seed))
+    points = points[geometry.contains(points)]
+    if len(points) == 0:
+        return None, None
+    evaluation = sizing.evaluate(points)
+    return evaluation, evaluation.h**-3.0
+
+
 def check_element_limit(sizing, max_elements: float | None = None) -> float:
     """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra (None: the default,
     :func:`default_element_limit`)."""
@@ -129,12 +154,9 @@ def densest_pattern(sizing, samples: int = 1 << 15, seed: int = 0):
     smallest size, and ``graded`` is True: a 0.1 mm slit's 0.05 grown at 1.3 sets most of a part's elements,
     where the base pattern wins. (None, 0, False) where no point is inside."""
     geometry = sizing.geometry
-    points = stratified_points(*geometry.bounds, samples, np.random.default_rng(seed))
-    points = points[geometry.contains(points)]
-    if len(points) == 0:
+    evaluation, density = _sampled(sizing, samples, seed)
+    if evaluation is None:
         return None, 0.0, False
-    evaluation = sizing.evaluate(points)
-    density = evaluation.h**-3.0
     graded = evaluation.h < evaluation.raw * (1.0 - GRADED)
     owner = np.where(graded | (evaluation.winner < 0), -1, evaluation.winner)
     shares = np.bincount(owner + 1, density, minlength=len(sizing.placed) + 1) / density.sum()
