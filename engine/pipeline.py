@@ -5,6 +5,7 @@ from __future__ import annotations
 import inspect
 import logging
 import os
+import re
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -222,6 +223,19 @@ class Prepared(NamedTuple):
     sizing: SizingField
 
 
+def _placed_list(placed, most: int = 3) -> str:
+    """The placed patterns' ids, those of one placement on more than ``most`` features as one item:
+    'static-stress/place[2] on 64 features' (a recipe's re-entrant edges), not 64 ids."""
+    groups: dict[str, list[str]] = {}
+    for p in placed:
+        placement, _, where = p.id.partition("@")
+        groups.setdefault(placement if re.fullmatch(r"(corner|curve|patch)-\d+", where) else p.id, []).append(p.id)
+    return ", ".join(
+        f"{placement} on {len(ids)} features" if len(ids) > most else ", ".join(ids)
+        for placement, ids in groups.items()
+    )
+
+
 def _drivers(sizing) -> str:
     """', most sized by PATTERN (S %), ...' for the patterns that size a tenth or more of the expected elements."""
     shares = [f"{name} ({100 * share:.0f} %)" for name, share in pattern_shares(sizing).items() if share >= 0.1]
@@ -259,7 +273,7 @@ def prepare(job: Job, max_elements: float | None = None, timings: dict | None = 
     log.info(
         "sizing: %d placed patterns (%s), H = %.4g, h from %.4g to %.4g, about %.3g tetrahedra expected%s (%.2f s)",
         len(sizing.placed),
-        ", ".join(p.id for p in sizing.placed),
+        _placed_list(sizing.placed),
         sizing.global_size,
         sizing.h_min,
         sizing.h_max,

@@ -188,3 +188,19 @@ def test_the_patterns_that_size_most_elements_are_named_before_packing(monkeypat
         )
     (line,) = [r.getMessage() for r in caplog.records if r.getMessage().startswith("sizing:")]
     assert re.search(r"tetrahedra expected, most sized by [a-z-]+ \(\d+ %\)", line)
+
+
+def test_the_sizing_line_counts_a_placement_on_many_features_once():
+    """A recipe's placement on 64 re-entrant edges is one item of the sizing line, not 64 ids; a few features
+    and the always-placed rules' classes (thin-wall@wall-1.19) keep their ids."""
+    from types import SimpleNamespace
+
+    from engine.pipeline import _placed_list
+
+    ids = ["base", *(f"r/place[2]@curve-{k}" for k in range(64)), "r/place[1]@patch-3", "thin-wall@wall-1.19"]
+    ids += [f"curvature@radius-{r}" for r in (1, 2, 3, 4)]
+    line = _placed_list([SimpleNamespace(id=i) for i in ids])
+    assert line == (
+        "base, r/place[2] on 64 features, r/place[1]@patch-3, thin-wall@wall-1.19, curvature@radius-1, "
+        "curvature@radius-2, curvature@radius-3, curvature@radius-4"
+    )
