@@ -372,7 +372,7 @@ def test_inside_out_cube_is_turned(capsys, tmp_path):
     job = surface_job(tmp_path, "inverted.off")
     err = assert_meshed(capsys, tmp_path, job)
     (warning,) = notes(err)
-    assert warning.startswith(f"{tmp_path / 'inverted.off'}: ") and "turned 1 inside-out shell" in warning
+    assert warning.startswith(f"warning: {tmp_path / 'inverted.off'}: ") and "turned 1 inside-out shell" in warning
 
 
 def test_inconsistent_winding_is_fixed(capsys, tmp_path):
@@ -385,7 +385,7 @@ def test_inconsistent_winding_is_fixed(capsys, tmp_path):
     job = surface_job(tmp_path, "mixed.ply")
     err = assert_meshed(capsys, tmp_path, job)
     (warning,) = notes(err)
-    assert warning.startswith(f"{tmp_path / 'mixed.ply'}: ") and "fixed inconsistent face orientation" in warning
+    assert warning.startswith(f"warning: {tmp_path / 'mixed.ply'}: ") and "fixed inconsistent face orientation" in warning
 
 
 # --------------------------------------------------------------------------- job files
