@@ -385,7 +385,8 @@ def test_inconsistent_winding_is_fixed(capsys, tmp_path):
     job = surface_job(tmp_path, "mixed.ply")
     err = assert_meshed(capsys, tmp_path, job)
     (warning,) = notes(err)
-    assert warning.startswith(f"warning: {tmp_path / 'mixed.ply'}: ") and "fixed inconsistent face orientation" in warning
+    assert warning.startswith(f"warning: {tmp_path / 'mixed.ply'}: ")
+    assert "fixed inconsistent face orientation" in warning
 
 
 # --------------------------------------------------------------------------- job files
