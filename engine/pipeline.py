@@ -5,7 +5,6 @@ from __future__ import annotations
 import inspect
 import logging
 import os
-import re
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -224,12 +223,11 @@ class Prepared(NamedTuple):
 
 
 def _placed_list(placed, most: int = 3) -> str:
-    """The placed patterns' ids, those of one placement on more than ``most`` features as one item:
+    """The placed patterns' ids, those of one ``every:`` placement on more than ``most`` features as one item:
     'static-stress/place[2] on 64 features' (a recipe's re-entrant edges), not 64 ids."""
     groups: dict[str, list[str]] = {}
     for p in placed:
-        placement, _, where = p.id.partition("@")
-        groups.setdefault(placement if re.fullmatch(r"(corner|curve|patch)-\d+", where) else p.id, []).append(p.id)
+        groups.setdefault(p.placement.id if p.placement.every else p.id, []).append(p.id)
     return ", ".join(
         f"{placement} on {len(ids)} features" if len(ids) > most else ", ".join(ids)
         for placement, ids in groups.items()

@@ -197,9 +197,14 @@ def test_the_sizing_line_counts_a_placement_on_many_features_once():
 
     from engine.pipeline import _placed_list
 
-    ids = ["base", *(f"r/place[2]@curve-{k}" for k in range(64)), "r/place[1]@patch-3", "thin-wall@wall-1.19"]
-    ids += [f"curvature@radius-{r}" for r in (1, 2, 3, 4)]
-    line = _placed_list([SimpleNamespace(id=i) for i in ids])
+    def placed(id, every=None):
+        return SimpleNamespace(id=id, placement=SimpleNamespace(id=id.partition("@")[0], every=every))
+
+    edges = [placed(f"r/place[2]@curve-{k}", "re-entrant-edge") for k in range(64)]
+    classes = [placed(f"curvature@radius-{r}") for r in (1, 2, 3, 4)]
+    line = _placed_list(
+        [placed("base"), *edges, placed("r/place[1]@patch-3", "hole"), placed("thin-wall@wall-1.19"), *classes]
+    )
     assert line == (
         "base, r/place[2] on 64 features, r/place[1]@patch-3, thin-wall@wall-1.19, curvature@radius-1, "
         "curvature@radius-2, curvature@radius-3, curvature@radius-4"
