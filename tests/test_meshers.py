@@ -325,6 +325,32 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
     assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}
 
 
+def test_a_flat_cap_gets_a_node_beneath_it():
+    """A flat tet under a roof of two boundary faces (16 deg, a fold on a convex patch: no swap of its ring
+    helps) becomes, with the ring around its inner edge, the star of one new node beneath: every tet
+    positive, same volume, same boundary faces, min dihedral 39 deg."""
+    from engine.mesh import TetMesh, signed_volumes
+    from engine.meshing.improve import TARGET, fill_flat_caps, min_dihedrals
+    from engine.meshing.tetra import orient
+
+    points = np.array([[-1, 0, 0], [1, 0, 0], [0, -0.6, 0.15], [0, 0.6, 0.15], [0, -0.6, -0.9], [0, 0.6, -0.9]])
+    tets, _ = orient(points, np.array([[0, 1, 2, 3], [0, 1, 3, 5], [0, 1, 5, 4], [0, 1, 4, 2]]))
+
+    def free(p, t):
+        mesh = TetMesh(points=p, tets=t, node_level=np.zeros(len(p), np.int8), node_entity=np.zeros(len(p), np.int64))
+        return {tuple(np.roll(f, -int(np.argmin(f)))) for f in mesh.boundary_faces().tolist()}
+
+    boundary = np.array(sorted(free(points, tets)))
+    assert min_dihedrals(points, tets).min() < 17
+    filled, capped, added = fill_flat_caps(points, tets, boundary, TARGET)
+    assert added == 1 and len(filled) == 7 and len(capped) == 8
+    assert np.allclose(filled[:6], points) and filled[6, 2] < 0  # the new node is last, beneath the roof
+    assert (signed_volumes(filled, capped) > 0).all()
+    assert signed_volumes(filled, capped).sum() == pytest.approx(signed_volumes(points, tets).sum())
+    assert free(filled, capped) == free(points, tets)
+    assert min_dihedrals(filled, capped).min() > 35
+
+
 def test_an_inner_edge_of_needles_is_swapped_away():
     """Three needles around an inner edge (radius ratio 0.08, under the floor) become the two tets of the
     triangle around it: same volume, same free faces."""

@@ -9,8 +9,8 @@
 3. IN/OUT: regions of tets between the boundary triangles are classified by
    the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``).
 4. Quality improvement (``improve.py``): boundary nodes move only in the
-   last relocation pass (sliding on the surface and put back onto it); what
-   is still under the floor is repaired by peels, collapses and swaps, then
+   last relocation pass (sliding on the surface and put back onto it); flat
+   caps get a node beneath them (tagged ``steiner``); what is still under the floor is repaired by peels, collapses and swaps, then
    Gmsh's optimiser and the relocation run once more, and the repairs again.
 """
 
@@ -29,6 +29,7 @@ from .improve import (
     FLOOR,
     TARGET,
     collapse_bad_nodes,
+    fill_flat_caps,
     gmsh_optimize,
     min_dihedrals,
     peel_boundary_slivers,
@@ -103,7 +104,16 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         slid = np.flatnonzero(moved & surface_node)
         points[slid] = geometry.closest_point(points[slid])[0]  # back onto the surface
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
-    h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])  # Steiner nodes stay inside
+    points, tets, capped = fill_flat_caps(points, tets, boundary, TARGET)
+    if capped:  # nodes beneath flat caps: the mesher's own, free like Steiner nodes
+        level, entity, bubble, fixed, held, surface_node = (
+            np.concatenate([values, np.full(capped, new, values.dtype)])
+            for values, new in ((level, STEINER), (entity, -1), (bubble, -1), (fixed, 0), (held, 0), (surface_node, 0))
+        )
+        slide = tuple(np.vstack([directions, np.zeros((capped, 3))]) for directions in slide)
+        points, more = relocate(points, tets, slide[0], seed)
+        moves += more
+    h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(points) - len(nodes))])  # Steiner nodes stay inside
     repair = _Repair(
         surface_node & ~held,
         (surface_node | (level == VOLUME) | (level == STEINER)) & ~held,
@@ -139,7 +149,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         "steiner_points": len(steiner),
         "hull_tets": hull_tets,
         "outside_tets_dropped": hull_tets - len(tets),
-        "unused_nodes_dropped": int(len(nodes) + len(steiner) - len(points)),
+        "nodes_added_under_flat_caps": capped,
+        "unused_nodes_dropped": int(len(nodes) + len(steiner) + capped - len(points)),
         "min_dihedral_before_improvement": before,
         "relocated_nodes": moves,
         "boundary_slivers_removed": peeled,

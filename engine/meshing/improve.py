@@ -18,7 +18,13 @@
    fix: on the 1M junction with the cylinder at the centre, a tet of three
    cylinder nodes and one volume node stayed at 14.0 deg without it).
 
-3. What is still under the floor (10 deg / radius ratio 0.15) is repaired by
+3. A flat cap (a tet under the target whose four nodes are all on the boundary:
+   the fold of two surface triangles on a convex patch, 10-16 deg at 24 nodes
+   per circle) gets a new node beneath it (``fill_flat_caps``): no swap mends it,
+   as the rings around its inner edges have no node under the fold, and a peel
+   would dent the surface by more than the repairs' tolerance.
+
+4. What is still under the floor (10 deg / radius ratio 0.15) is repaired by
    topology (``peel_boundary_slivers``, ``collapse_bad_nodes``, ``swap_bad_faces``):
    flat tets between boundary faces peeled, crowded nodes collapsed into a
    neighbour, inner faces and edges swapped; sharp curves stay element edges and
@@ -60,6 +66,7 @@ RING = 7  # the largest ring of tets around an edge that is retriangulated (42 w
 PEEL_ROUNDS = 8  # rounds of each repair (peels, collapses, swaps): one can lay the next bad tet open
 CANDIDATES = 24  # perturbation directions per node and pass
 STEPS = np.array([0.04, 0.12, 0.25])  # perturbation lengths, x the mean edge length of the star
+CAP_PLACES = np.linspace(0.0, 1.0, 11)  # where a flat cap's new node is tried: edge midpoint (0) to ring centre (1)
 
 
 def gmsh_optimize(points: np.ndarray, tets: np.ndarray, fixed: np.ndarray):
@@ -511,6 +518,61 @@ def _swap_round(points, tets, quality):
     keep = np.ones(len(tets), bool)
     keep[gone] = False
     return np.vstack([tets[keep]] + added), len(added)
+
+
+def fill_flat_caps(points, tets, boundary, quality: float):
+    """Give a node beneath each flat cap: a tet below ``quality`` whose four nodes are all on the boundary
+    (over the fold of two surface triangles on a convex patch, where a peel would dent the surface and no
+    swap helps, as its rings have no node beneath the fold). The ring of tets around one of its inner
+    edges becomes the star of a new node at the best of CAP_PLACES places between the edge's midpoint
+    and the ring's centre, if every new tet is positive and the worst of them is better than the worst of
+    the ring's. In rounds; returns (points (n + added, 3), tets, added count): the new nodes come last."""
+    return _in_rounds(lambda points, tets: _cap_round(points, tets, boundary, quality), (points, tets))
+
+
+def _cap_round(points, tets, boundary, quality):
+    bad = np.flatnonzero(quality_below(points, tets, quality))
+    on_boundary = np.zeros(len(points), bool)
+    on_boundary[boundary.ravel()] = True
+    bad = bad[on_boundary[tets[bad]].all(axis=1)]
+    if not len(bad):
+        return points, tets, 0
+    bad = bad[np.argsort(min_dihedrals(points, tets[bad]), kind="stable")]  # the worst first
+    star_start, star_tets = node_stars(tets, len(points))
+    touched = np.zeros(len(tets), bool)
+    gone, added, new_points = [], [], []
+    for t in bad:
+        best = None  # (worst new quality, ring, rows, place)
+        for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
+            a, b = tets[t][i], tets[t][j]
+            ring = np.intersect1d(
+                star_tets[star_start[a] : star_start[a + 1]], star_tets[star_start[b] : star_start[b + 1]]
+            )
+            if touched[ring].any() or _ring(tets[ring], a, b) is None:  # a boundary edge's ring is open
+                continue
+            nodes, local = np.unique(tets[ring], return_inverse=True)  # the ring's tets on its own nodes
+            local = local.reshape(-1, 4)
+            here = len(nodes)  # the new node, last of the ring's
+            a_local, b_local = np.searchsorted(nodes, [a, b])
+            rows = np.vstack([np.where(local == b_local, here, local), np.where(local == a_local, here, local)])
+            middle = (points[a] + points[b]) / 2
+            centre = points[nodes].mean(axis=0)
+            for place in middle + CAP_PLACES[:, None] * (centre - middle):
+                q = _qualities(np.vstack([points[nodes], place]), rows)
+                if best is None or q.min() > best[0]:
+                    best = (q.min(), ring, np.append(nodes, len(points) + len(new_points))[rows], place)
+        if best is None or best[0] <= max(_qualities(points, tets[best[1]]).min(), 0.0):
+            continue
+        _, ring, rows, place = best
+        touched[ring] = True
+        gone.extend(ring.tolist())
+        added.append(rows)
+        new_points.append(place[None])
+    if not gone:
+        return points, tets, 0
+    keep = np.ones(len(tets), bool)
+    keep[gone] = False
+    return np.vstack([points, *new_points]), np.vstack([tets[keep]] + added), len(new_points)
 
 
 def _ring(rows, a, b):
