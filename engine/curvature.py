@@ -18,7 +18,8 @@ across the axis), on a doubly curved blend (both curvatures of one sign) up to 3
 triangle's centre lies h^2 (k1 + k2) / 12 off the surface (h^2 / (6 r) on a sphere). A planar face along a
 tangent fillet takes some of the fillet's curvature (about twice its radius). One radius per face: along a
 cone's long facets it is the facet's, not its tip's. Measured once per geometry and feature angle
-(:func:`curvature`); the faces are grouped in classes of like
+(:func:`curvature`), which gives the faces of a patch of known shape the shape's own radius instead (planes,
+cylinders; a CAD file's or built-in shape's cones, spheres and tori); the faces are grouped in classes of like
 radius by :func:`engine.thickness.classes`.
 """
 
@@ -98,22 +99,54 @@ class Curvature:
         return np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1) / 2
 
 
-def curvature(geometry, feature_angle: float, assembly=None) -> Curvature:
-    """The geometry's radius of curvature, measured on the first call per feature angle and kept with it. Of
-    an ``assembly`` (engine/cad.py ``Assembly``, whose union ``geometry`` is): every body's surface, each face
+def curvature(geometry, features) -> Curvature:
+    """The geometry's radius of curvature: measured (:func:`measure`) where its ``features`` know no shape, the
+    shape's own on the faces of a patch that is planar or lies on a known cylinder, cone, sphere or torus (a CAD
+    face's, a shape's, a cylinder fitted to an STL's facets: the measure smears a narrow fillet's strip of long
+    facets, r 1.5 read as 0.6 to 3.8); made on the first call per feature angle and kept with the geometry. Of
+    an assembly (engine/cad.py ``Assembly``, whose union ``geometry`` is): every body's surface, each face
     once per body, the interfaces included: a bolt's shank in a plate's hole is no face of the union (its
     two sides' chords change the bodies' volumes, not the union's: their mean curvatures cancel)."""
-    if assembly is not None:
-        bodies = [curvature(body, feature_angle) for body, _ in assembly.bodies]
+    if features.assembly is not None:
+        bodies = [curvature(body, body_features) for body, body_features in features.assembly.bodies]
         return Curvature(
             triangles=np.concatenate([b.triangles for b in bodies]),
             radius=np.concatenate([b.radius for b in bodies]),
             mean=np.concatenate([b.mean for b in bodies]),
         )
     cache = geometry.__dict__.setdefault("_curvature", {})
-    if feature_angle not in cache:
-        cache[feature_angle] = measure(geometry.mesh, feature_angle)
-    return cache[feature_angle]
+    if features.feature_angle not in cache:
+        cache[features.feature_angle] = _known_shapes(
+            measure(geometry.mesh, features.feature_angle), geometry, features
+        )
+    return cache[features.feature_angle]
+
+
+def _known_shapes(measured: Curvature, geometry, features) -> Curvature:
+    """``measured`` with the radius and mean curvature of every face of a patch of known shape replaced by the
+    shape's at the face's centre (the mean's sign: convex where the face's outward normal leaves the shape's
+    centre or axis)."""
+    from .exact import CylinderSurface, Plane
+
+    radius, mean = measured.radius.copy(), measured.mean.copy()
+    mesh = geometry.mesh
+    given = features.exact[0] if features.exact is not None else [None] * len(features.patches)
+    for patch, surface in zip(features.patches, given):
+        if not hasattr(surface, "curvatures"):  # a B-spline face's own closest point, or an STL's patch
+            if patch.planar:
+                surface = Plane(patch.centroid, patch.normal)
+            elif patch.cylinder is not None:
+                surface = CylinderSurface(patch.cylinder.point, patch.cylinder.axis, patch.cylinder.radius)
+            else:
+                continue
+        centres = mesh.triangles_center[patch.faces]
+        k = surface.curvatures(centres)
+        outward = np.sign(np.einsum("ij,ij->i", mesh.face_normals[patch.faces], surface.normals(centres)))
+        chord = np.maximum(np.abs(k).max(axis=1), 2.0 / 3.0 * np.abs(k.sum(axis=1)))
+        with np.errstate(divide="ignore"):
+            radius[patch.faces] = np.where(chord * PLANAR * geometry.scale > 1, 1.0 / chord, np.inf)
+        mean[patch.faces] = np.where(np.isfinite(radius[patch.faces]), outward * k.sum(axis=1) / 2, 0.0)
+    return Curvature(measured.triangles, radius, mean)
 
 
 def measure(mesh: trimesh.Trimesh, feature_angle: float = 30.0) -> Curvature:

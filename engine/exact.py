@@ -61,6 +61,10 @@ class Plane:
         """Unit normals (k, 3) at the closest points, up to sign."""
         return np.broadcast_to(self.normal, x.shape)
 
+    def curvatures(self, x: np.ndarray) -> np.ndarray:
+        """Principal curvatures (k, 2) at the closest points: none."""
+        return np.zeros((len(x), 2))
+
 
 @dataclass(frozen=True)
 class CylinderSurface:
@@ -82,6 +86,11 @@ class CylinderSurface:
         radial = rel - np.outer(rel @ self.axis, self.axis)
         return radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
 
+    def curvatures(self, x: np.ndarray) -> np.ndarray:
+        """Principal curvatures (k, 2) at the closest points, > 0 bending away from :meth:`normals` (which point
+        away from the axis): 1 / radius across the axis, 0 along it."""
+        return np.tile([1.0 / self.radius, 0.0], (len(x), 1))
+
 
 @dataclass(frozen=True)
 class Sphere:
@@ -98,6 +107,10 @@ class Sphere:
         """Unit normals (k, 3) at the closest points, up to sign."""
         rel = x - self.centre
         return rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300)
+
+    def curvatures(self, x: np.ndarray) -> np.ndarray:
+        """Principal curvatures (k, 2) at the closest points, > 0 bending away from :meth:`normals` (outward)."""
+        return np.full((len(x), 2), 1.0 / self.radius)
 
 
 @dataclass(frozen=True)
@@ -125,6 +138,13 @@ class Cone:
         radial = rel - np.outer(rel @ self.axis, self.axis)
         unit = radial / np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-300)
         return np.cos(self.angle) * unit - np.sin(self.angle) * self.axis
+
+    def curvatures(self, x: np.ndarray) -> np.ndarray:
+        """Principal curvatures (k, 2) at the closest points, > 0 bending away from :meth:`normals` (which point
+        away from the axis): cos(half-angle) / the distance from the axis round it, 0 along the generator."""
+        rel = self.project(x) - self.apex
+        around = np.linalg.norm(rel - np.outer(rel @ self.axis, self.axis), axis=1)
+        return np.column_stack([np.cos(self.angle) / np.maximum(around, 1e-300), np.zeros(len(x))])
 
 
 def fit_cone(vertices: np.ndarray, normals: np.ndarray, centres: np.ndarray) -> Cone | None:
@@ -195,6 +215,21 @@ class Torus:
         rel = x - tube
         length = np.linalg.norm(rel, axis=1, keepdims=True)
         return np.where(length > 0, tube + self.minor * rel / np.where(length > 0, length, 1), x)
+
+    def normals(self, x: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) at the closest points, up to sign: out of the tube."""
+        rel = x - self.tube_centre(x)
+        return rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300)
+
+    def curvatures(self, x: np.ndarray) -> np.ndarray:
+        """Principal curvatures (k, 2) at the closest points, > 0 bending away from the normal pointing out of the
+        tube: 1 / minor round the tube, cos(phi) / (distance from the axis) round the axis (phi the angle round
+        the tube from its outer equator: < 0 on the inner, saddle side)."""
+        on = self.project(x)
+        rel = on - self.centre
+        around = np.linalg.norm(rel - np.outer(rel @ self.axis, self.axis), axis=1)
+        cos_phi = (around - self.major) / self.minor
+        return np.column_stack([np.full(len(x), 1.0 / self.minor), cos_phi / np.maximum(around, 1e-300)])
 
 
 def fit_surface(

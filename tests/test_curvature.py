@@ -262,3 +262,38 @@ def test_a_box_gets_no_curvature(tmp_path):
     result = run(job_from_dict({"geometry": {"file": str(tmp_path / "block.stl")}}), write=False)
     assert [p.pattern for p in result.sizing.placed] == ["uniform-domain"]
     assert (result.audit.cells["winner"] == 0).all()
+
+
+@pytest.mark.parametrize("source", ["step", "stl"])
+def test_a_patch_of_known_shape_gets_its_own_radius(source, tmp_path):
+    """The curvature rule sizes a face of a known shape by the shape's radius, not the measure: on a CAD
+    tessellation a narrow fillet is a strip of long facets whose measured radius smears into the planes beside it
+    (an outside test's con-rod: r 1.5 fillets read as 0.6 to 3.8 in 19 radius classes); from an STL, the radius
+    of the cylinder fitted to the fillet's facets. Planar patches are planar (inf), and a concave fillet's mean
+    curvature is negative (it gains volume from its chords)."""
+    from engine.curvature import curvature
+    from engine.describe import solid_features
+
+    path = tmp_path / f"bracket.{source}"
+    with gmsh_model("test-known-radius", {"Mesh.MeshSizeFromCurvature": 24, "Mesh.MeshSizeMax": 4.0}) as occ:
+        base = occ.fuse([(3, occ.addBox(0, 0, 0, 80, 50, 10))], [(3, occ.addBox(0, 40, 10, 80, 10, 20))])[0][0][1]
+        occ.synchronize()
+        corner = [
+            c
+            for _, c in occ.getEntities(1)
+            if np.allclose(occ.getBoundingBox(1, c), [0, 40, 10, 80, 40, 10], atol=1e-6)
+        ]
+        occ.fillet([base], corner, [1.5])
+        occ.synchronize()
+        if source == "stl":
+            gmsh.model.mesh.generate(2)
+        gmsh.write(str(path))
+    _, geometry, features = solid_features(path)
+    (fillet,) = [p for p in features.patches if "fillet" in p.kinds]
+    known = curvature(geometry, features)
+    assert known.radius[fillet.faces] == pytest.approx(1.5, rel=2e-3)
+    assert (known.mean[fillet.faces] < 0).all()
+    planes = np.concatenate([p.faces for p in features.patches if p.planar])
+    assert np.isinf(known.radius[planes]).all()
+    measured = measure(geometry.mesh, features.feature_angle).radius
+    assert np.ptp(measured[fillet.faces]) > 0.1 or np.isfinite(measured[planes]).any()

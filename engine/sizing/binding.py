@@ -200,7 +200,7 @@ def _volume_budget(pattern, placement, features, geometry, global_size) -> dict:
     budget = float(params.get("volume_change", 0.0))
     if budget <= 0:
         return {}
-    raised, before, after = curvature(geometry, features.feature_angle, features.assembly).raised_per_circle(
+    raised, before, after = curvature(geometry, features).raised_per_circle(
         float(geometry.mesh.volume),
         budget,
         float(params["per_circle"]),
@@ -239,7 +239,7 @@ def _anchors(pattern, placement, features, geometry, global_size):
         return [(None, lambda spacing: region)]
     if pattern.anchor in LOCAL_SCALES:
         if pattern.anchor == "curvature":
-            parts = curvature(geometry, features.feature_angle, features.assembly).parts()
+            parts = curvature(geometry, features).parts()
         elif pattern.anchor == "narrow-face":
             parts = narrow_faces(geometry, features, global_size)
         else:
