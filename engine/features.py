@@ -366,6 +366,8 @@ WIDE = 3.0  # a coplanar region this many times wider than the facets it bends i
 MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
 SEED_BAND = 0.25  # a halved piece's faces in this top and bottom share of their normals' spread stay apart
 SMOOTHING = 4  # rounds of neighbour averaging of the normals' spread before the seeds are chosen
+CREASE_TAIL = 3  # a crease continued across a smooth piece goes on the way of its last this many edges, ...
+CONTINUE_TURN = 60.0  # ... each step turning by less than this (degrees) from the way so far
 ISLAND = 3  # a cut's side keeps no component of fewer faces than this apart from its largest
 FOLD = 3.0  # a chart's border folds where it lays two border points this many times nearer than in space
 FOLD_SAMPLES = 4  # border points looked at per median border edge, ...
@@ -399,10 +401,85 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     pieces = [np.flatnonzero(region == r) for r in planar_regions]
     rest = in_patch & ~planar
     keep = rest[pairs[:, 0]] & rest[pairs[:, 1]]
+    inner = np.flatnonzero(smooth)[face_patch[adjacency[smooth, 0]] == face_patch[faces[0]]][keep]  # rows of pairs
+    creases = np.flatnonzero(~smooth & in_patch[adjacency[:, 0]] & in_patch[adjacency[:, 1]])
+    keep[np.flatnonzero(keep)[_continued_creases(mesh, rest, inner, creases)]] = False
     labels = _components(n, pairs[keep])
     for r in np.unique(labels[rest]):
         pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep], source)
     return pieces
+
+
+def _continued_creases(mesh, rest: np.ndarray, rows: np.ndarray, creases: np.ndarray) -> np.ndarray:
+    """Which of the face-adjacency ``rows`` (smooth edges between two faces of the ``rest`` mask) a crease is
+    continued across, to cut the rest there. A chain of ``creases`` (sharp edges inside the patch) that comes
+    in from the rest's border and ends inside it is the sharp part of a border the input's surface lost: the
+    mitre between two fillets that meet at a sharp corner (a pocket's floor fillets), sharp at the walls and
+    fading out towards the floor, so that the fillets make one smooth ring that no chart of one cylinder
+    covers. From its end the walk goes on along the input's edges, each step the straightest on from the way
+    so far (the chain's last CREASE_TAIL edges, then the steps, turning by less than CONTINUE_TURN), until it
+    meets the rest's border or another crease; a walk that does not is dropped. How bent an edge is says
+    nothing there: the fillets' own facet edges are as bent as the mitre's fading end."""
+    cut = np.zeros(len(rows), bool)
+    if not len(creases) or not len(rows):
+        return cut
+    edges = _shared_edges(mesh, mesh.face_adjacency[rows])
+    crease_edges = _shared_edges(mesh, mesh.face_adjacency[creases])
+    count = len(mesh.vertices)
+    degree = np.bincount(crease_edges.ravel(), minlength=count)
+    outside = np.zeros(count, bool)  # vertices of a face that is not in the rest
+    outside[mesh.faces[~rest].ravel()] = True
+    stop = outside | (degree > 0)
+    chains = [_chain_from(end, crease_edges, degree, outside) for end in np.flatnonzero((degree == 1) & ~outside)]
+    chains = [chain for chain in chains if chain is not None]
+    if not chains:
+        return cut
+    # the rest's smooth edges from each vertex: CSR of (vertex -> edge index), both directions
+    tail = np.concatenate([edges[:, 0], edges[:, 1]])
+    order = np.argsort(tail, kind="stable")
+    start = np.searchsorted(tail[order], np.arange(count + 1))
+    head = np.concatenate([edges[:, 1], edges[:, 0]])[order]
+    index = np.tile(np.arange(len(edges)), 2)[order]
+    limit = np.cos(np.radians(CONTINUE_TURN))
+    vertices = mesh.vertices
+    for chain in chains:
+        here = chain[0]
+        way = _unit(vertices[here] - vertices[chain[min(CREASE_TAIL, len(chain) - 1)]])
+        walked = []
+        for _ in range(len(edges)):
+            ahead = _unit(vertices[head[start[here] : start[here + 1]]] - vertices[here])
+            turn = ahead @ way
+            pick = int(np.argmax(turn)) if len(turn) else -1
+            if pick < 0 or turn[pick] < limit:
+                break
+            walked.append(index[start[here] + pick])
+            here = head[start[here] + pick]
+            way = _unit(way + ahead[pick])
+            if stop[here]:
+                cut[walked] = True
+                break
+    return cut
+
+
+def _chain_from(end: int, chain_edges: np.ndarray, degree: np.ndarray, outside: np.ndarray) -> list[int] | None:
+    """The vertices of the chain of ``chain_edges`` from its loose ``end`` to an ``outside`` vertex or a
+    junction of chains; None if it ends loose there too (a mitre comes in from the walls' corner; a lone
+    crease between two facets near a tessellated cone's tip is no lost border)."""
+    chain = [end]
+    for _ in range(len(chain_edges)):
+        here = chain[-1]
+        if outside[here] or degree[here] > 2:
+            return chain
+        step = chain_edges[(chain_edges == here).any(axis=1)].ravel()
+        following = [v for v in step if v != here and (len(chain) < 2 or v != chain[-2])]
+        if not following:
+            return None
+        chain.append(int(following[0]))
+    return None
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    return vectors / np.maximum(np.linalg.norm(vectors, axis=-1, keepdims=True), 1e-300)
 
 
 def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:

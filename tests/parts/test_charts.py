@@ -65,3 +65,54 @@ def test_no_patch_of_the_part_folds_when_flattened(boss_arm, tessellation):
         chart = _chart(geometry.mesh, patch.faces)
         assert chart is not None and len(border_folds(*chart)[0]) == 0, patch.id
     assert len(features.patches) < 30  # cut at the folds, not into facets
+
+
+POCKET_FILLET = 1.5
+
+
+@pytest.fixture(scope="module")
+def pocket_with_floor_fillets(tmp_path_factory):
+    """A block with a pocket whose floor edges are filleted and whose vertical corners are sharp (a con-rod's
+    shank pocket): at each corner two fillets meet in a mitre, sharp at the walls, smooth at the floor. Its
+    STL at both tessellations and the fillets' CAD area."""
+    import gmsh
+
+    occ = gmsh.model.occ
+    out = tmp_path_factory.mktemp("pocket")
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    paths = {}
+    try:
+        for tessellation, (angle, linear) in make_parts.TESSELLATIONS.items():
+            gmsh.clear()
+            tool = occ.addBox(10, 8, 6, 40, 14, 10)
+            occ.synchronize()
+            floor = [c for _, c in gmsh.model.getBoundary([(3, tool)], oriented=False, combined=False)]
+            floor = [c for _, c in gmsh.model.getBoundary([(2, f) for f in floor], oriented=False, combined=False)]
+            edges = sorted({c for c in floor if make_parts._at_z(6)(occ.getBoundingBox(1, c))})
+            tool = make_parts._fillet(tool, edges, POCKET_FILLET)
+            block = make_parts._cut(occ.addBox(0, 0, 0, 60, 30, 12), tool)
+            occ.synchronize()
+            faces = gmsh.model.getBoundary([(3, block)], oriented=False)
+            area = sum(occ.getMass(2, t) for _, t in faces if gmsh.model.getType(2, t) == "Cylinder")
+            path = out / f"pocket-{tessellation}.stl"
+            make_parts._export(path, angle, linear * float(np.linalg.norm([60, 30, 12])))
+            make_parts._clean(path)
+            paths[tessellation] = path
+    finally:
+        gmsh.finalize()
+    return paths, area
+
+
+@pytest.mark.parametrize("tessellation", ["coarse", "fine"])
+def test_fillets_meeting_in_a_mitre_are_four_cylinder_patches(pocket_with_floor_fillets, tessellation):
+    """The mitres' sharp parts are continued across the smooth ring to the floor, so that each floor fillet is
+    a patch on one cylinder of its radius (without the continuation the ring was cut along its length into
+    pieces of two fillets each, on no cylinder: a con-rod's STL lost 4 of its 8 fillets)."""
+    paths, area = pocket_with_floor_fillets
+    geometry = load_surface(paths[tessellation])
+    features = detect_features(geometry)
+    fillets = [p for p in features.patches if p.cylinder is not None and abs(p.cylinder.radius - POCKET_FILLET) < 0.05]
+    assert len(fillets) == 4
+    assert all(p.cylinder.concave for p in fillets)
+    assert sum(p.area for p in fillets) == pytest.approx(area, rel=0.02)
