@@ -360,7 +360,9 @@ def _unzigzagged(curve: Curve) -> Curve:
 
 CREASE = 2.0  # a sharp edge inside one patch below this x the feature angle is a faceting crease
 CHART_CONE = 90.0  # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
-MAX_STRETCH = 1.6  # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15)
+MAX_STRETCH = 1.6  # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15), ...
+STRETCH_SHARE = 0.01  # ... but for this share of its area at either end, ...
+TIP_EXTENT = 0.1  # ... if it lies this close (x the chart's size) round one point (a cone's tip)
 COPLANAR = 1e-3  # radians: faces meeting at a smaller angle lie in one plane
 WIDE = 3.0  # a coplanar region this many times wider than the facets it bends into is a plane
 MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
@@ -721,7 +723,8 @@ def _chart_areas(vertices: np.ndarray, triangles: np.ndarray, uv: np.ndarray) ->
 def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | None:
     """(V, 2) least-squares conformal map (libigl LSCM) of a connected triangle set with a border,
     counter-clockwise where the triangles are, scaled so that its median length scale is 1; None when it
-    folds or stretches lengths by more than MAX_STRETCH between its triangles."""
+    folds or stretches lengths by more than MAX_STRETCH between its triangles (but at a cone's tip,
+    :func:`_stretched_at_a_tip`)."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
     triangles = np.ascontiguousarray(triangles, dtype=np.int64)
     loops = igl.boundary_loop_all(triangles) if len(triangles) else []
@@ -739,9 +742,31 @@ def conformal_map(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray | N
     if not np.all(flat[solid] > 0):
         return None
     scale = np.sqrt(flat[solid] / area[solid])
-    if scale.max() > MAX_STRETCH * scale.min():
+    if scale.max() > MAX_STRETCH * scale.min() and not _stretched_at_a_tip(
+        vertices, triangles[solid], scale, area[solid]
+    ):
         return None
     return uv / np.median(scale)
+
+
+def _stretched_at_a_tip(vertices: np.ndarray, triangles: np.ndarray, scale: np.ndarray, area: np.ndarray) -> bool:
+    """Whether a map's lengths ``scale`` (per triangle, of ``area``) stay within MAX_STRETCH of each other but
+    on the STRETCH_SHARE of the area most shrunk (or most stretched), and those triangles lie round one point,
+    within TIP_EXTENT of the chart's size: a cone's tip, where its conformal map shrinks as a power of the
+    distance (a drill point's by 2.1 times over a Gmsh surface mesh), not a dome's rim."""
+    order = np.argsort(scale)
+    share = np.cumsum(area[order]) / area.sum()
+    low, high = scale[order][np.searchsorted(share, [STRETCH_SHARE, 1.0 - STRETCH_SHARE])]
+    centres = vertices[triangles].mean(axis=1)
+    size = np.linalg.norm(np.ptp(centres, axis=0))
+    for tail, within in (
+        (scale < low, scale.max() <= MAX_STRETCH * low),
+        (scale > high, high <= MAX_STRETCH * scale.min()),
+    ):
+        tip = centres[tail]
+        if within and len(tip) and np.linalg.norm(tip - tip.mean(axis=0), axis=1).max() < TIP_EXTENT * size:
+            return True
+    return False
 
 
 def _half(mesh, faces: np.ndarray) -> np.ndarray:

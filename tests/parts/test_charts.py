@@ -116,3 +116,67 @@ def test_fillets_meeting_in_a_mitre_are_four_cylinder_patches(pocket_with_floor_
     assert len(fillets) == 4
     assert all(p.cylinder.concave for p in fillets)
     assert sum(p.area for p in fillets) == pytest.approx(area, rel=0.02)
+
+
+DRILL_RADIUS, DRILL_DEPTH = 2.5, 15.0
+
+
+@pytest.fixture(scope="module")
+def drilled_blind_hole(tmp_path_factory):
+    """A block with a blind drilled hole ending in a 118-degree drill point; its STL as OpenCASCADE
+    tessellates it (fine) and as an analysis surface mesh of Gmsh's (curvature-sized, as another mesher
+    exports it), whose small triangles round the tip make the cone's map shrink there."""
+    import gmsh
+
+    occ = gmsh.model.occ
+    out = tmp_path_factory.mktemp("drill")
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    diagonal = float(np.linalg.norm([40, 40, 30]))
+    tip = DRILL_RADIUS / np.tan(np.radians(59))
+    paths = {}
+    try:
+        for tessellation in ("occ", "gmsh"):
+            gmsh.clear()
+            bore = occ.addCylinder(20, 20, 30 - DRILL_DEPTH, 0, 0, DRILL_DEPTH + 1, DRILL_RADIUS)
+            point = occ.addCone(20, 20, 30 - DRILL_DEPTH, 0, 0, -tip, DRILL_RADIUS, 0)
+            make_parts._cut(occ.addBox(0, 0, 0, 40, 40, 30), make_parts._fuse(bore, point))
+            occ.synchronize()
+            path = out / f"drill-{tessellation}.stl"
+            if tessellation == "occ":
+                angle, linear = make_parts.TESSELLATIONS["fine"]
+                make_parts._export(path, angle, linear * diagonal)
+            else:
+                gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 24)
+                gmsh.option.setNumber("Mesh.MeshSizeMax", diagonal / 40)
+                gmsh.option.setNumber("Mesh.MeshSizeMin", diagonal / 1000)
+                gmsh.model.mesh.generate(2)
+                gmsh.option.setNumber("Mesh.Binary", 1)
+                gmsh.write(str(path))
+            make_parts._clean(path)
+            paths[tessellation] = path
+    finally:
+        gmsh.finalize()
+    return paths
+
+
+@pytest.mark.parametrize("tessellation", ["occ", "gmsh"])
+def test_a_drill_point_is_one_chart_and_its_rim_one_circle(drilled_blind_hole, tessellation):
+    """A cone's conformal map shrinks towards its tip (2.1 times over a drill point's facets), so the whole
+    point was refused as a chart and halved, its rim circle cut in two: the bore's bottom edge was then no
+    closed curve (no 'junction'). Its tip's 1 % of area aside, it stretches 1.5 times: one chart. Gmsh's
+    surface mesh of it fails so; OpenCASCADE's tessellation, a fan of long facets, never did."""
+    geometry = load_surface(drilled_blind_hole[tessellation])
+    features = detect_features(geometry)
+    centres = geometry.mesh.triangles_center
+    below = (centres[:, 2] < 30 - DRILL_DEPTH - 1e-6) & (centres[:, 2] > 30 - DRILL_DEPTH - DRILL_RADIUS)
+    point = np.flatnonzero(below & (np.hypot(*(centres[:, :2] - 20).T) < DRILL_RADIUS))
+    area = np.bincount(features.face_patch[point], weights=geometry.mesh.area_faces[point])
+    assert area.max() > 0.99 * area.sum()  # the tip's few facets, creased all round, aside
+    rims = [
+        c
+        for c in features.curves
+        if np.allclose(c.points[:, 2], 30 - DRILL_DEPTH, atol=1e-6)
+        and np.allclose(np.hypot(*(c.points[:, :2] - 20).T), DRILL_RADIUS, atol=1e-3)
+    ]
+    assert len(rims) == 1 and rims[0].closed
