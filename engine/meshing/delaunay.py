@@ -10,8 +10,9 @@
    the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``).
 4. Quality improvement (``improve.py``): boundary nodes move only in the
    last relocation pass (sliding on the surface and put back onto it); flat
-   caps get a node beneath them (tagged ``steiner``); what is still under the floor is repaired by peels, collapses and swaps, then
-   Gmsh's optimiser and the relocation run once more, and the repairs again.
+   caps get a node beneath them (tagged ``steiner``); what is still under
+   the floor is repaired by peels, collapses and swaps, then Gmsh's
+   optimiser and the relocation run once more, and the repairs again.
 """
 
 from __future__ import annotations
