@@ -42,7 +42,7 @@ PLACED = {
     "junction-centre": {"uniform-domain": 1, "plate-edge-junction": 1},
     "junction-edge": {"uniform-domain": 1, "plate-edge-junction": 1},
     "plate-hole-static": {"uniform-domain": 1, "hole": 1, "thin-wall": 1, "curvature": 1},
-    "bracket-fillet-fatigue": {"uniform-domain": 1, "fillet": 1, "thin-wall": 1, "curvature": 2},
+    "bracket-fillet-fatigue": {"uniform-domain": 1, "fillet": 1, "thin-wall": 1, "curvature": 1},
     "cracked-plate-fracture": {"uniform-domain": 1, "crack-front": 1, "thin-wall": 1},
     "bearing-block-stl": {
         "uniform-domain": 1,

@@ -60,7 +60,7 @@ def test_holes_bind_in_well_under_a_second(holed_block):
     kb = load_knowledge(job.knowledge)
     geometry, features = build_geometry(job)
     features = classify(features, kb.feature_kinds)
-    local_size(geometry), curvature(geometry, features.feature_angle)  # the always-placed rules' surface
+    local_size(geometry), curvature(geometry, features)  # the always-placed rules' surface
     start = time.perf_counter()  # measures, once per solid (0.5 s)
     placed = bind(kb, job_placements(job, kb), features, geometry, geometry.scale / 40)
     seconds = time.perf_counter() - start
