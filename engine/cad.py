@@ -34,7 +34,7 @@ from scipy.sparse import csgraph
 
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
-from .features import Circle, Cylinder, Features, detect_features, sweep
+from .features import Circle, Cylinder, Features, detect_features, sweep, unit
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -591,14 +591,14 @@ def _surface(kind: str, parameters) -> Surface:
         normal = p[:3] / np.linalg.norm(p[:3])
         exact = Plane(-p[3] * normal / np.linalg.norm(p[:3]), normal)
     elif kind == "Cylinder" and len(p) == 7:
-        exact = CylinderSurface(p[:3], _unit(p[3:6]), p[6])
+        exact = CylinderSurface(p[:3], unit(p[3:6]), p[6])
     elif kind == "Cone" and len(p) == 8:  # OCC: radius p[6] at p[:3], growing along the axis by semi-angle p[7]
-        axis = _unit(p[3:6]) * np.sign(p[7])
+        axis = unit(p[3:6]) * np.sign(p[7])
         exact = Cone(p[:3] - axis * p[6] / np.tan(abs(p[7])), axis, abs(float(p[7])))
     elif kind == "Sphere" and len(p) == 4:
         exact = Sphere(p[:3], p[3])
     elif kind == "Torus" and len(p) == 8:
-        exact = Torus(p[:3], _unit(p[3:6]), p[6], p[7])
+        exact = Torus(p[:3], unit(p[3:6]), p[6], p[7])
     return Surface(kind, p, exact)
 
 
@@ -648,10 +648,6 @@ def _parameters(surface) -> tuple[str, np.ndarray]:
     if isinstance(surface, Sphere):
         return "Sphere", np.r_[surface.centre, surface.radius]
     return "Torus", np.r_[surface.centre, surface.axis, surface.major, surface.minor]
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
 
 
 @contextmanager
@@ -850,7 +846,7 @@ def _canonical(surface: Surface) -> np.ndarray:
     point nearest the origin (two faces of one cylinder may carry different centres along it)."""
     p = surface.parameters.copy()
     if surface.form in ("Cylinder", "Cone", "Torus"):
-        axis = _unit(p[3:6])
+        axis = unit(p[3:6])
         axis = axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
         if surface.form == "Cylinder":
             p[:3] -= (p[:3] @ axis) * axis

@@ -383,15 +383,17 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     """The charts a smooth patch (``faces``) is cut into; one piece when it can be flattened whole.
 
     First its planar regions (coplanar faces, wide against the facets they bend
-    into: :func:`_wide`); then each connected rest is one
-    piece if it lies on a cylinder or can be flattened (:func:`flattenable`),
-    else it is halved across its widest spread of normals until every piece can.
+    into: :func:`_wide`); then the rest is cut where a crease fades out in it
+    (:func:`_continued_creases`), and each connected rest is one piece if it lies
+    on a cylinder or can be flattened (:func:`flattenable`), else it is halved
+    across its widest spread of normals until every piece can.
     ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges. A piece still
     neither after MAX_SPLITS halvings is refused (GeometryError naming ``source``), before any packing.
     """
     adjacency = mesh.face_adjacency
-    pairs = adjacency[smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]])]
-    bent = mesh.face_adjacency_angles[smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]])] >= COPLANAR
+    rows = np.flatnonzero(smooth & (face_patch[adjacency[:, 0]] == face_patch[faces[0]]))  # the patch's smooth edges
+    pairs = adjacency[rows]
+    bent = mesh.face_adjacency_angles[rows] >= COPLANAR
     n = len(mesh.faces)
     in_patch = np.zeros(n, bool)
     in_patch[faces] = True
@@ -403,9 +405,8 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     pieces = [np.flatnonzero(region == r) for r in planar_regions]
     rest = in_patch & ~planar
     keep = rest[pairs[:, 0]] & rest[pairs[:, 1]]
-    inner = np.flatnonzero(smooth)[face_patch[adjacency[smooth, 0]] == face_patch[faces[0]]][keep]  # rows of pairs
     creases = np.flatnonzero(~smooth & in_patch[adjacency[:, 0]] & in_patch[adjacency[:, 1]])
-    keep[np.flatnonzero(keep)[_continued_creases(mesh, rest, inner, creases)]] = False
+    keep[np.flatnonzero(keep)[_continued_creases(mesh, rest, rows[keep], creases)]] = False
     labels = _components(n, pairs[keep])
     for r in np.unique(labels[rest]):
         pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep], source)
@@ -425,8 +426,7 @@ def _continued_creases(mesh, rest: np.ndarray, rows: np.ndarray, creases: np.nda
     cut = np.zeros(len(rows), bool)
     if not len(creases) or not len(rows):
         return cut
-    edges = _shared_edges(mesh, mesh.face_adjacency[rows])
-    crease_edges = _shared_edges(mesh, mesh.face_adjacency[creases])
+    edges, crease_edges = mesh.face_adjacency_edges[rows], mesh.face_adjacency_edges[creases]
     count = len(mesh.vertices)
     degree = np.bincount(crease_edges.ravel(), minlength=count)
     outside = np.zeros(count, bool)  # vertices of a face that is not in the rest
@@ -446,17 +446,17 @@ def _continued_creases(mesh, rest: np.ndarray, rows: np.ndarray, creases: np.nda
     vertices = mesh.vertices
     for chain in chains:
         here = chain[0]
-        way = _unit(vertices[here] - vertices[chain[min(CREASE_TAIL, len(chain) - 1)]])
+        way = unit(vertices[here] - vertices[chain[min(CREASE_TAIL, len(chain) - 1)]])
         walked = []
         for _ in range(len(edges)):
-            ahead = _unit(vertices[head[start[here] : start[here + 1]]] - vertices[here])
+            ahead = unit(vertices[head[start[here] : start[here + 1]]] - vertices[here])
             turn = ahead @ way
             pick = int(np.argmax(turn)) if len(turn) else -1
             if pick < 0 or turn[pick] < limit:
                 break
             walked.append(index[start[here] + pick])
             here = head[start[here] + pick]
-            way = _unit(way + ahead[pick])
+            way = unit(way + ahead[pick])
             if stop[here]:
                 cut[walked] = True
                 break
@@ -480,7 +480,8 @@ def _chain_from(end: int, chain_edges: np.ndarray, degree: np.ndarray, outside: 
     return None
 
 
-def _unit(vectors: np.ndarray) -> np.ndarray:
+def unit(vectors: np.ndarray) -> np.ndarray:
+    """``vectors`` (..., 3) scaled to length 1 along the last axis (a zero vector stays zero)."""
     return vectors / np.maximum(np.linalg.norm(vectors, axis=-1, keepdims=True), 1e-300)
 
 

@@ -481,7 +481,7 @@ def _swap_round(points, tets, quality):
             options.append((np.array([t, neighbour[0]]), rows))
         for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
             a, b = tets[t][i], tets[t][j]
-            ring = np.intersect1d(star(a), star(b))
+            ring = _edge_ring(star_start, star_tets, a, b)
             if len(ring) > RING:
                 continue
             polygon = _ring(tets[ring], a, b)
@@ -531,10 +531,10 @@ def fill_flat_caps(points, tets, boundary, quality: float):
 
 
 def _cap_round(points, tets, boundary, quality):
-    bad = np.flatnonzero(quality_below(points, tets, quality))
     on_boundary = np.zeros(len(points), bool)
     on_boundary[boundary.ravel()] = True
-    bad = bad[on_boundary[tets[bad]].all(axis=1)]
+    capping = np.flatnonzero(on_boundary[tets].all(axis=1))  # few: only these are judged
+    bad = capping[_below_quality(points, np.ascontiguousarray(tets, dtype=np.int64), capping, quality)]
     if not len(bad):
         return points, tets, 0
     bad = bad[np.argsort(min_dihedrals(points, tets[bad]), kind="stable")]  # the worst first
@@ -545,9 +545,7 @@ def _cap_round(points, tets, boundary, quality):
         best = None  # (worst new quality, ring, rows, place)
         for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
             a, b = tets[t][i], tets[t][j]
-            ring = np.intersect1d(
-                star_tets[star_start[a] : star_start[a + 1]], star_tets[star_start[b] : star_start[b + 1]]
-            )
+            ring = _edge_ring(star_start, star_tets, a, b)
             if touched[ring].any() or _ring(tets[ring], a, b) is None:  # a boundary edge's ring is open
                 continue
             nodes, local = np.unique(tets[ring], return_inverse=True)  # the ring's tets on its own nodes
@@ -573,6 +571,11 @@ def _cap_round(points, tets, boundary, quality):
     keep = np.ones(len(tets), bool)
     keep[gone] = False
     return np.vstack([points, *new_points]), np.vstack([tets[keep]] + added), len(new_points)
+
+
+def _edge_ring(star_start, star_tets, a, b) -> np.ndarray:
+    """The tets round edge (a, b): those in both nodes' stars (``node_stars``)."""
+    return np.intersect1d(star_tets[star_start[a] : star_start[a + 1]], star_tets[star_start[b] : star_start[b + 1]])
 
 
 def _ring(rows, a, b):
