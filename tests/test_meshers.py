@@ -325,6 +325,29 @@ def test_a_flat_tet_between_two_boundary_faces_is_peeled():
     assert {tuple(sorted(f)) for f in boundary.tolist()} >= {(0, 1, 2), (0, 2, 3)}
 
 
+def test_a_flat_tet_inside_is_unfolded_not_dropped():
+    """Two pyramids on one square (four coplanar, cospherical nodes: a thin plate's edges packed alike on top
+    and bottom) split it by different diagonals, with a zero-volume tet between them, as HXT returned once on
+    a plate with a hole (the IN/OUT pass dropped it: 4 boundary edges of one face, the mesh refused). It is
+    inside; unfolded, the four tets fill the bipyramid, every one positive, its eight faces the boundary."""
+    from engine.mesh import TetMesh, signed_volumes
+    from engine.meshing.tetra import inside_by_boundary, orient, unfold_flat
+
+    a, b, c, d, p, q = range(6)
+    points = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [1, 0.5, 1], [0.8, 0.4, -1.2]], float)
+    tets, _ = orient(points, np.array([[p, a, b, c], [p, a, c, d], [q, a, b, d], [q, b, c, d], [a, b, c, d]]))
+    pyramid = [[p, a, b], [p, b, c], [p, c, d], [p, d, a], [q, b, a], [q, c, b], [q, d, c], [q, a, d]]
+    outward = [np.cross(*(points[f[1:]] - points[f[0]])) @ (points[f].mean(0) - points.mean(0)) > 0 for f in pyramid]
+    boundary = np.array([f if out else f[::-1] for f, out in zip(pyramid, outward)])
+    inside = inside_by_boundary(points, tets, boundary)
+    assert inside.all()  # the flat tet too: it has a neighbour across every face and no boundary face
+    unfolded = unfold_flat(points, tets[inside])
+    assert len(unfolded) == 4 and (signed_volumes(points, unfolded) > 1e-3).all()
+    assert signed_volumes(points, unfolded).sum() == pytest.approx(2 * 2.2 / 3)
+    mesh = TetMesh(points=points, tets=unfolded, node_level=np.zeros(6, np.int8), node_entity=np.zeros(6, np.int64))
+    assert {tuple(sorted(f)) for f in mesh.boundary_faces().tolist()} == {tuple(sorted(f)) for f in pyramid}
+
+
 def test_a_flat_cap_gets_a_node_beneath_it():
     """A flat tet under a roof of two boundary faces (16 deg, a fold on a convex patch: no swap of its ring
     helps) becomes, with the ring around its inner edge, the star of one new node beneath: every tet

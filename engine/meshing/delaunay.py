@@ -39,7 +39,7 @@ from .improve import (
     swap_bad_faces,
 )
 from .surface import check_closed, triangulate_boundary
-from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
+from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize, unfold_flat
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +84,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         [packing.ids[nodes] if packing.ids is not None else np.full(len(nodes), -1), np.full(len(steiner), -1)]
     ).astype(np.int64)
     hull_tets = len(tets)
-    tets = tets[inside_by_boundary(points, tets, boundary)]
+    tets = unfold_flat(points, tets[inside_by_boundary(points, tets, boundary)])
     tets = canonical(orient(points, tets)[0])  # Gmsh's order varies from run to run
     seconds["connect"] = time.perf_counter() - start
 

@@ -46,7 +46,7 @@ from . import register_mesher
 from .delaunay import mesh_delaunay
 from .improve import FLOOR, gmsh_optimize, min_dihedrals, relocate, swap_bad_faces
 from .surface import triangulate_boundary
-from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize
+from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize, unfold_flat
 
 log = logging.getLogger(__name__)
 
@@ -567,7 +567,7 @@ def _layer(points, boundary, free, seed):
     local_boundary = new[boundary]
     tets, steiner = tetrahedralize(points[nodes], local_boundary)
     work = np.vstack([points[nodes], steiner])
-    tets = tets[inside_by_boundary(work, tets, local_boundary)]
+    tets = unfold_flat(work, tets[inside_by_boundary(work, tets, local_boundary)])
     tets = canonical(orient(work, tets)[0])
     fixed = np.concatenate([~free[nodes], np.zeros(len(steiner), bool)])
     optimised, moved = gmsh_optimize(work, tets, fixed)

@@ -10,6 +10,7 @@ import numpy as np
 
 from .._numba import numba
 from ..mesh import FACES, signed_volumes
+from ..tetmetrics import shape_quality
 from ..topology import find_face, node_stars
 
 FLAT = 1e-10  # |6 x volume| below this x (edge length)^3: a flat tetrahedron
@@ -75,7 +76,9 @@ def inside_by_boundary(points: np.ndarray, tets: np.ndarray, boundary: np.ndarra
     every outside region of the hull touches the boundary, so what is not
     reached is inside. Exact: no inside tests on the curved solid, whose
     chords the boundary triangles are; reaching a tet that lies behind a
-    boundary triangle is an error.
+    boundary triangle is an error. A flat tet is inside only if it has a
+    neighbour across each face and no boundary triangle (:func:`unfold_flat`
+    takes it out); on a boundary or the hull it is not.
     """
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     start, star = node_stars(tets, len(points))
@@ -139,12 +142,74 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
                 stack[top] = s
                 top += 1
     inside = ~outside
-    for t in range(m):  # flat tets (HXT fills a flat hull face with them) are never inside
-        a, b, c, d = points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]
-        ab = b - a
-        if abs(np.dot(ab, np.cross(c - a, d - a))) <= FLAT * np.dot(ab, ab) ** 1.5:
-            inside[t] = False
+    for t in range(m):  # a flat tet on the hull (HXT fills a flat hull face with them) is not inside
+        if inside[t] and _is_flat(points, tets[t]):
+            for k in range(4):
+                f = faces[k]
+                s, _ = find_face(tets, start, star, tets[t, f[0]], tets[t, f[1]], tets[t, f[2]], t)
+                if blocked[t, k] or s < 0:
+                    inside[t] = False
     return inside, conflicts
+
+
+def unfold_flat(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """``tets`` without their flat tetrahedra: each one inside the mesh is unfolded, the rest dropped.
+
+    Four coplanar nodes on one sphere (a thin plate's edges packed alike on its top and bottom, a rectangle of
+    four nodes across a corner) have two Delaunay diagonals; HXT may split the quad by one for the pyramid on
+    one side and by the other for the pyramid on the other side, with a zero-volume tet between them, which
+    the IN/OUT pass could only drop (a hole in the solid: the boundary is not a two-manifold). The pyramid
+    whose apex sees the quad from one side is re-split by the other side's diagonal, whichever of the two
+    re-splits leaves the better worst tet; a flat tet whose sides are not two such pyramids is dropped.
+    """
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    flat = np.flatnonzero(_flat(np.ascontiguousarray(points, dtype=np.float64), tets))
+    if not len(flat):
+        return tets
+    start, star = node_stars(tets, len(points))
+    gone = np.zeros(len(tets), bool)
+    gone[flat] = True
+    added = []
+    for t in flat:
+        own = np.sort(tets[t, FACES], axis=1)
+        across = [find_face(tets, start, star, *face, t)[0] for face in own]
+        if min(across) < 0 or gone[across].any():
+            continue
+        apex = [int(np.setdiff1d(tets[s], tets[t])[0]) for s in across]
+        sides = [(k, j) for k in range(4) for j in range(k + 1, 4) if apex[k] == apex[j]]
+        if len(sides) != 2 or sorted(sides[0] + sides[1]) != [0, 1, 2, 3]:
+            continue
+        best = None
+        for keep, redo in (sides, sides[::-1]):  # the pyramid 'redo' takes the triangles of the pyramid 'keep'
+            new = np.array([[apex[redo[0]], *own[k]] for k in keep])
+            new = np.where((signed_volumes(points, new) < 0)[:, None], new[:, [1, 0, 2, 3]], new)
+            worst = min(shape_quality(*points[row]) for row in new)
+            if worst > 0 and (best is None or worst > best[0]):
+                best = (worst, [across[k] for k in redo], new)
+        if best is not None:
+            gone[best[1]] = True
+            added.append(best[2])
+    return np.concatenate([tets[~gone], *added]) if added else tets[~gone]
+
+
+@numba.njit(cache=True)
+def _is_flat(points, tet):
+    """Whether the tet is flat: |6 x volume| at most FLAT x (its first edge's length)^3."""
+    a = points[tet[0]]
+    bx, by, bz = points[tet[1], 0] - a[0], points[tet[1], 1] - a[1], points[tet[1], 2] - a[2]
+    cx, cy, cz = points[tet[2], 0] - a[0], points[tet[2], 1] - a[1], points[tet[2], 2] - a[2]
+    dx, dy, dz = points[tet[3], 0] - a[0], points[tet[3], 1] - a[1], points[tet[3], 2] - a[2]
+    six_volume = bx * (cy * dz - cz * dy) + by * (cz * dx - cx * dz) + bz * (cx * dy - cy * dx)
+    return abs(six_volume) <= FLAT * (bx * bx + by * by + bz * bz) ** 1.5
+
+
+@numba.njit(cache=True)
+def _flat(points, tets):
+    """(m,) whether each tet is flat (:func:`_is_flat`)."""
+    flat = np.zeros(len(tets), np.bool_)
+    for t in range(len(tets)):
+        flat[t] = _is_flat(points, tets[t])
+    return flat
 
 
 def canonical(tets: np.ndarray) -> np.ndarray:
