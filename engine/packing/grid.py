@@ -31,9 +31,8 @@ from dataclasses import replace
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..sampling import thin
 from . import CURVE, LEVELS, PATCH, VOLUME, Packing, register_packer
-from .start import CANDIDATES_PER_H2, SPACING_SLACK, SURFACE_EXCLUSION, _subdivide, corner_nodes, curve_nodes
+from .start import SPACING_SLACK, corner_nodes, curve_nodes, random_patch_nodes
 
 ALIGNED = np.cos(np.radians(6.0))  # a normal within 6 deg of a frame axis is aligned with it
 GRID_EXCLUSION = 0.45  # x h kept free between grid nodes and the boundary nodes (a boundary layer of >= 0.5 s)
@@ -523,35 +522,9 @@ def _wall_nodes(geometry, features, sizing, frame, centres, cells, aligned):
 
 
 def _random_patch_nodes(geometry, features, sizing, boundary: Packing, rng, faces_mask, avoid=None) -> Packing:
-    """The start's patch nodes (:func:`engine.packing.start.patch_nodes`) on the faces of ``faces_mask`` only,
-    none within WALL_CLEAR h of the ``avoid`` points (the wall nodes)."""
-    mesh = geometry.mesh
-    if not faces_mask.any():
-        return Packing(
-            points=np.zeros((0, 3)), level=np.zeros(0, np.int8), entity=np.zeros(0, np.int64), radius=np.zeros(0)
-        )
-    leaves, owner = _subdivide(mesh.triangles[faces_mask], sizing)
-    owner = np.flatnonzero(faces_mask)[owner]
-    area = 0.5 * np.linalg.norm(np.cross(leaves[:, 1] - leaves[:, 0], leaves[:, 2] - leaves[:, 0]), axis=1)
-    expected = CANDIDATES_PER_H2 * area / sizing(leaves.mean(axis=1)) ** 2
-    count = np.floor(expected).astype(int) + (rng.random(len(leaves)) < expected % 1)
-    tri = np.repeat(leaves, count, axis=0)
-    owner = np.repeat(owner, count)
-    u = rng.random((len(tri), 2))
-    flip = u.sum(axis=1) > 1
-    u[flip] = 1 - u[flip]
-    candidates = tri[:, 0] + u[:, :1] * (tri[:, 1] - tri[:, 0]) + u[:, 1:] * (tri[:, 2] - tri[:, 0])
-    patch = features.face_patch[owner]
-    if avoid is not None and len(avoid) and len(candidates):
-        clear = _gap(avoid, candidates) >= WALL_CLEAR * sizing(candidates)
-        candidates, patch = candidates[clear], patch[clear]
-    all_points = np.concatenate([boundary.points, candidates])
-    h = sizing(all_points)
-    keep = thin(all_points, SURFACE_EXCLUSION * h, rng, fixed=np.arange(len(all_points)) < len(boundary))
-    keep = keep[len(boundary) :]
-    return Packing(
-        points=candidates[keep],
-        level=np.full(int(keep.sum()), PATCH, np.int8),
-        entity=patch[keep],
-        radius=h[len(boundary) :][keep] / 2,
+    """The start's random patch nodes (:func:`engine.packing.start.random_patch_nodes`) on the faces of
+    ``faces_mask`` only, none within WALL_CLEAR h of the ``avoid`` points (the wall nodes)."""
+    points, patch = random_patch_nodes(
+        geometry, features, sizing, boundary.points, rng, faces_mask, avoid=avoid, gap=WALL_CLEAR
     )
+    return Packing(points=points, level=np.full(len(points), PATCH, np.int8), entity=patch, radius=sizing(points) / 2)
