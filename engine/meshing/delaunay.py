@@ -7,7 +7,8 @@
    with those triangles as constrained faces; Steiner points it adds are
    kept, tagged ``steiner``, and counted.
 3. IN/OUT: regions of tets between the boundary triangles are classified by
-   the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``).
+   the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``);
+   a flat tet inside is unfolded (``tetra.unfold_flat``).
 4. Quality improvement (``improve.py``): boundary nodes move only in the
    last relocation pass (sliding on the surface and put back onto it); flat
    caps get a node beneath them (tagged ``steiner``); what is still under
