@@ -21,6 +21,7 @@ CANDIDATES_PER_H2 = 8.0  # surface candidates per h^2 of area before thinning
 SHORT_CURVE = 0.1  # a curve shorter than this x h is no mesh edge: its end corners share one node
 ROW_SPACING = np.sqrt(3) / 2  # rows of a hexagonal lattice are this x its spacing apart
 RING_SAMPLES = 256  # samples round a ring and along a wall where h is integrated
+RING_PROBES = 64  # samples round a ring where its smallest h is taken and where it is tested against the patch
 WASHER_REACH = 4.0  # x the radius: how far out the rings round a cylinder's end go at most (a hole pattern's
 # extent is 3 radii)
 CIRCLE_GAP = 0.02  # x the radius: a node this near a cylinder's end circle is on it (24 facets: chords 0.009 r in)
@@ -82,8 +83,7 @@ def curve_nodes(features, sizing, existing) -> Packing:
         length = curve.length
         count = int(min(1e6, max(8, np.ceil(8 * length / sizing.h_min))))
         s = np.linspace(0.0, length, count + 1)
-        h = sizing(curve.point_at(s))
-        steps = np.concatenate([[0.0], np.cumsum(np.diff(s) * 0.5 * (1 / h[1:] + 1 / h[:-1]))])
+        steps = _integral_of_inverse(s, sizing(curve.point_at(s)))
         segments = max(3 if curve.closed else 1, int(np.round(steps[-1])))
         targets = (
             np.linspace(0.0, steps[-1], segments + 1)[1:-1]
@@ -167,7 +167,8 @@ def ring_nodes(geometry, features, index: int, sizing, fixed: np.ndarray, rng) -
     frame = _CylinderFrame(cylinder)
     along = (features.patches[index].vertices - cylinder.point) @ frame.axis
     ends = (along.min(), along.max())
-    turn = np.linspace(0.0, 2 * np.pi, RING_SAMPLES + 1)
+    fixed = fixed[frame.near(fixed, ends, (1 + WASHER_REACH) * cylinder.radius + sizing.h_max)]
+    turn = np.linspace(0.0, 2 * np.pi, RING_PROBES + 1)
     heights = np.linspace(*ends, RING_SAMPLES + 1)
     rows = _row_levels(heights, frame, heights, np.full_like(heights, cylinder.radius), sizing, turn)[1:-1]
     from_start = np.arange(1, len(rows) + 1)
@@ -187,7 +188,7 @@ def ring_nodes(geometry, features, index: int, sizing, fixed: np.ndarray, rng) -
         if plane is None:
             continue
         reach = cylinder.radius if side < 0 else WASHER_REACH * cylinder.radius
-        radii = cylinder.radius + side * np.linspace(0.0, reach, 4 * RING_SAMPLES + 1)
+        radii = cylinder.radius + side * np.linspace(0.0, reach, RING_SAMPLES + 1)
         radii = radii[radii > 0]
         levels = _row_levels(radii, frame, np.full_like(radii, end), radii, sizing, turn)[1:]
         rings = frame.valid_rings(geometry, features, plane, end, levels, sizing, fixed, turn)
@@ -221,6 +222,14 @@ class _CylinderFrame:
         round_ = np.cos(angles)[:, None] * self.e1 + np.sin(angles)[:, None] * self.e2
         return self.cylinder.point + heights[:, None, None] * self.axis + radii[:, None, None] * round_[None]
 
+    def near(self, points, ends, reach: float) -> np.ndarray:
+        """(k,) whether each point lies within ``reach`` of the axis and of the span between heights ``ends``: the
+        nodes a ring there may come near (the rest are left out of its clearance tests)."""
+        relative = points - self.cylinder.point
+        along = relative @ self.axis
+        radius = np.linalg.norm(relative - along[:, None] * self.axis, axis=1)
+        return (along > ends[0] - reach) & (along < ends[1] + reach) & (radius < reach)
+
     def on_circle(self, points, height: float) -> np.ndarray:
         """(k,) whether each point lies on the cylinder's circle at ``height``: in its plane, within CIRCLE_GAP x the
         radius of it (a faceted circle's nodes lie on its chords)."""
@@ -242,17 +251,17 @@ class _CylinderFrame:
         counts = np.maximum(3, np.round(steps[:, -1]).astype(int))
         relative = fixed - self.cylinder.point
         angle = np.mod(np.arctan2(relative @ self.e2, relative @ self.e1), 2 * np.pi)
+        circle = {height: angle[self.on_circle(fixed, height)] for height in np.unique(reference)}
         points = []
         for ring, (count, warp) in enumerate(zip(counts, warps)):
-            mine = self.on_circle(fixed, reference[ring])
-            phase = np.angle(np.exp(1j * count * np.interp(angle[mine], turn, warp)).sum()) / count
+            phase = np.angle(np.exp(1j * count * np.interp(circle[reference[ring]], turn, warp)).sum()) / count
             wanted = np.mod(phase + (np.arange(count) + shifts[ring]) * 2 * np.pi / count, 2 * np.pi)
             points.append(self.at(heights[ring : ring + 1], radii[ring : ring + 1], np.interp(wanted, warp, turn))[0])
         return np.concatenate(points)
 
     def valid_rings(self, geometry, features, plane, height, radii, sizing, fixed, turn) -> np.ndarray:
-        """The first of the rings ``radii`` at ``height`` that lie wholly on the patch ``plane`` and keep
-        ROW_SPACING x h from every ``fixed`` node off the cylinder's circle there; up to the first that does not."""
+        """The rings ``radii`` at ``height`` up to the first that leaves the patch ``plane`` or comes within
+        ROW_SPACING x h of a ``fixed`` node off the cylinder's circle there."""
         if not len(radii):
             return radii
         samples = self.at(np.full(len(radii), height), radii, turn[:-1]).reshape(-1, 3)
