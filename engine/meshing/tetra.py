@@ -181,8 +181,7 @@ def unfold_flat(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
             continue
         best = None
         for keep, redo in (sides, sides[::-1]):  # the pyramid 'redo' takes the triangles of the pyramid 'keep'
-            new = np.array([[apex[redo[0]], *own[k]] for k in keep])
-            new = np.where((signed_volumes(points, new) < 0)[:, None], new[:, [1, 0, 2, 3]], new)
+            new, _ = orient(points, np.array([[apex[redo[0]], *own[k]] for k in keep]))
             worst = min(shape_quality(*points[row]) for row in new)
             if worst > 0 and (best is None or worst > best[0]):
                 best = (worst, [across[k] for k in redo], new)
