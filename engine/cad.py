@@ -34,7 +34,7 @@ from scipy.sparse import csgraph
 
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
-from .features import Circle, Cylinder, Features, detect_features, sweep, unit
+from .features import Circle, Cylinder, Features, detect_features, sweep, torus_kind, tube_sweep, unit
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -49,7 +49,6 @@ SLIVER = 1e-5  # x the model size: a face narrower than this on average is an ar
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
-HALF_TURN = 170.0  # degrees round its tube: a concave torus turning less is a fillet, one turning more a bent bore
 # or round groove, a 'hole' (the turn knowledge/features.yaml tells a cylindrical hole from a fillet by)
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
@@ -438,6 +437,7 @@ class _CadFaces:
             self.feature_angle,
             [lambda _, g=g: group == g for g in range(1, group.max() + 1)],
             [self.surfaces[k].form == "Cylinder" for k in face[first]],
+            tori=False,
         )
         patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
         patches = [
@@ -876,7 +876,7 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, group: np.ndarray):
         tube = exact.tube_centre(centres)
         concave = np.mean(np.einsum("ij,ij->i", centres - tube, normals)) < 0
         face_points = geometry.mesh.vertices[np.unique(geometry.mesh.faces[group])]
-        kind = ("hole" if _tube_sweep(exact, face_points) > HALF_TURN else "fillet",)
+        kind = (torus_kind(tube_sweep(exact, face_points)),)
         return dataclasses.replace(
             patch,
             kinds=[*patch.kinds, *kind] if concave else patch.kinds,
@@ -899,16 +899,6 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, group: np.ndarray):
             concave = np.mean(np.einsum("ij,ij->i", radial, normals)) < 0
             return dataclasses.replace(patch, kinds=[*patch.kinds, "countersink" if concave else "chamfer"])
     return patch
-
-
-def _tube_sweep(exact, points: np.ndarray) -> float:
-    """The angle (degrees) round the tube of torus ``exact`` that ``points`` (k, 3) on it cover."""
-    tube = exact.tube_centre(points)
-    outward = tube - exact.centre
-    outward /= np.linalg.norm(outward, axis=1, keepdims=True)
-    rel = points - tube
-    section = np.column_stack([np.einsum("ij,ij->i", rel, outward), rel @ exact.axis, np.zeros(len(rel))])
-    return sweep(section, np.array([0.0, 0.0, 1.0]))
 
 
 def _cylinder(exact: CylinderSurface, centres: np.ndarray, normals: np.ndarray, vertices: np.ndarray) -> Cylinder:

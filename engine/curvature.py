@@ -19,8 +19,8 @@ triangle's centre lies h^2 (k1 + k2) / 12 off the surface (h^2 / (6 r) on a sphe
 tangent fillet takes some of the fillet's curvature (about twice its radius). One radius per face: along a
 cone's long facets it is the facet's, not its tip's. Measured once per geometry and feature angle
 (:func:`curvature`), which gives the faces of a patch of known shape the shape's own radius instead (planes,
-cylinders; a CAD file's or built-in shape's cones, spheres and tori); the faces are grouped in classes of like
-radius by :func:`engine.thickness.classes`.
+cylinders and tori fitted to an STL's facets; a CAD file's or built-in shape's cones, spheres and tori); the
+faces are grouped in classes of like radius by :func:`engine.thickness.classes`.
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ class Curvature:
 def curvature(geometry, features) -> Curvature:
     """The geometry's radius of curvature: measured (:func:`measure`) where its ``features`` know no shape, the
     shape's own on the faces of a patch that is planar or lies on a known cylinder, cone, sphere or torus (a CAD
-    face's, a shape's, a cylinder fitted to an STL's facets: the measure smears a narrow fillet's strip of long
+    face's, a shape's, a cylinder or torus fitted to an STL's facets: the measure smears a narrow fillet's strip of long
     facets, r 1.5 read as 0.6 to 3.8); made on the first call per feature angle and kept with the geometry. Of
     an assembly (engine/cad.py ``Assembly``, whose union ``geometry`` is): every body's surface, each face
     once per body, the interfaces included: a bolt's shank in a plate's hole is no face of the union (its
@@ -126,7 +126,7 @@ def _known_shapes(measured: Curvature, geometry, features) -> Curvature:
     """``measured`` with the radius and mean curvature of every face of a patch of known shape replaced by the
     shape's at the face's centre (the mean's sign: convex where the face's outward normal leaves the shape's
     centre or axis)."""
-    from .exact import CylinderSurface, Plane
+    from .exact import CylinderSurface, Plane, Torus
 
     radius, mean = measured.radius.copy(), measured.mean.copy()
     mesh = geometry.mesh
@@ -137,6 +137,8 @@ def _known_shapes(measured: Curvature, geometry, features) -> Curvature:
                 surface = Plane(patch.centroid, patch.normal)
             elif patch.cylinder is not None:
                 surface = CylinderSurface(patch.cylinder.point, patch.cylinder.axis, patch.cylinder.radius)
+            elif patch.torus is not None:
+                surface = Torus(patch.torus.centre, patch.torus.axis, patch.torus.major, patch.torus.minor)
             else:
                 continue
         centres = mesh.triangles_center[patch.faces]

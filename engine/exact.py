@@ -1,5 +1,5 @@
-"""Exact surfaces: the plane, cylinder, sphere or cone that a patch's input vertices lie on, and nodes moved
-onto them.
+"""Exact surfaces: the plane, cylinder, sphere, cone or torus that a patch's input vertices lie on, and nodes
+moved onto them.
 
 A faceted input (a built-in shape's faceting, an STL exported from CAD) puts its vertices on the true
 surface and its facets' insides off it, by up to the faceting's sagitta. A patch whose vertices all fit one
@@ -239,14 +239,18 @@ def fit_surface(
     tolerance: float,
     normals: np.ndarray | None = None,
     centres: np.ndarray | None = None,
+    torus=None,
 ):
-    """The Plane, CylinderSurface, Sphere or Cone all ``vertices`` (k, 3) lie on within ``tolerance``, or
-    None. ``cylinder`` is the patch's fitted :class:`engine.features.Cylinder` (its axis), if any; the
-    faces' ``normals`` and ``centres`` (f, 3), if given, allow a cone."""
+    """The Plane, CylinderSurface, Sphere, Cone or Torus all ``vertices`` (k, 3) lie on within ``tolerance``,
+    or None. ``cylinder`` and ``torus`` are the patch's fitted :class:`engine.features.Cylinder` (its axis) and
+    :class:`engine.features.Torus`, if any; the faces' ``normals`` and ``centres`` (f, 3), if given, allow a
+    cone."""
     if len(vertices) < 4:
         return None
     candidates = []
-    if planar:
+    if torus is not None:
+        candidates.append(Torus(torus.centre, torus.axis, torus.major, torus.minor))
+    elif planar:
         centre = vertices.mean(axis=0)
         normal = np.linalg.svd(vertices - centre, full_matrices=False)[2][2]
         candidates.append(Plane(centre, normal))
@@ -280,7 +284,7 @@ def exact_surfaces(geometry, features) -> list:
     tolerance = EXACT_TOLERANCE * geometry.scale
     normals, centres = geometry.mesh.face_normals, geometry.mesh.triangles_center
     return [
-        fit_surface(p.vertices, p.planar, p.cylinder, tolerance, normals[p.faces], centres[p.faces])
+        fit_surface(p.vertices, p.planar, p.cylinder, tolerance, normals[p.faces], centres[p.faces], p.torus)
         for p in features.patches
     ]
 

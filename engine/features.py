@@ -55,6 +55,19 @@ class Cylinder:
         return self.sweep > 330.0
 
 
+@dataclass(frozen=True)
+class Torus:
+    """A patch that lies on a torus (an STL's rim fillet round a hole, a ring): the tube of radius ``minor``
+    round the circle of radius ``major`` about ``axis`` through ``centre``; ``concave`` when the material is
+    outside the tube (a fillet)."""
+
+    centre: np.ndarray
+    axis: np.ndarray
+    major: float
+    minor: float
+    concave: bool
+
+
 @dataclass(frozen=True, kw_only=True)
 class Corner:
     id: str
@@ -131,7 +144,8 @@ class Patch:
     cylinder: Cylinder | None = None
     names: list[str] = field(default_factory=list)
     kinds: list[str] = field(default_factory=list)
-    circle: Circle | None = None  # a toroidal blend's tube (CAD input): its radius is the blend's
+    circle: Circle | None = None  # a toroidal blend's tube: its radius is the blend's
+    torus: Torus | None = None  # the torus an STL patch's facets fit (a CAD face's is its exact surface)
     surface: str | None = None  # the CAD face type (Plane, Cylinder, Torus, BSpline surface on Cone, ...), CAD only
 
 
@@ -226,7 +240,9 @@ def first_segment(curve, end: int) -> np.ndarray:
     return step / (np.linalg.norm(step) or 1.0)
 
 
-def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=()) -> Features:
+def detect_features(
+    geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=(), tori: bool = True
+) -> Features:
     """Find corners, feature curves and patches of ``geometry`` (angles in degrees).
 
     ``face_groups`` are functions ``triangles (F, 3, 3) -> bool mask``; each
@@ -240,6 +256,8 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     bounded normal spread, each of which can be flattened; the cuts are
     smooth (``sharp=False``) curves. ``on_cylinder``: per face group, whether it is known to lie on a
     cylinder (a CAD face's surface, where a short or B-spline face's facets fit none): never cut into charts.
+    ``tori``: give a curved patch the torus its facets fit (:func:`fit_torus`; not for a CAD model, whose faces
+    know their surfaces).
     """
     mesh = geometry.mesh
     threshold = np.radians(feature_angle)
@@ -287,10 +305,22 @@ def detect_features(geometry: Geometry, feature_angle: float = 30.0, face_groups
     return Features(
         corners=corners,
         curves=[c if c.sharp else _unzigzagged(c) for c in curves],
-        patches=faceted_cylinders(mesh, patches, face_patch, sharp),
+        patches=[_toroidal(mesh, p) if tori else p for p in faceted_cylinders(mesh, patches, face_patch, sharp)],
         face_patch=face_patch,
         feature_angle=feature_angle,
     )
+
+
+def _toroidal(mesh, patch: Patch) -> Patch:
+    """``patch`` with the torus its facets fit (:func:`fit_torus`), if it is curved, on no cylinder, and fits one:
+    its tube circle and, concave, the kind a CAD torus gets (:func:`torus_kind`: a rim fillet round a hole)."""
+    if patch.planar or patch.cylinder is not None:
+        return patch
+    torus = fit_torus(mesh.triangles_center[patch.faces], mesh.face_normals[patch.faces], patch.vertices)
+    if torus is None:
+        return patch
+    kinds = [*patch.kinds, torus_kind(tube_sweep(torus, patch.vertices))] if torus.concave else patch.kinds
+    return replace(patch, torus=torus, circle=Circle(torus.centre, torus.axis, torus.minor), kinds=kinds)
 
 
 def faceted_cylinders(mesh, patches: list, face_patch: np.ndarray, sharp: np.ndarray) -> list:
@@ -377,6 +407,26 @@ MAX_FOLD_SAMPLES = 200_000  # ... and at most this many per chart
 RING_FACETS = 7  # planar patches round one axis, all vertices on one circle, that make a faceted cylinder ...
 RING_TURN = 60.0  # ... each turning at most this (degrees) from the next
 PARALLEL = 1e-3  # unit edge directions this close are one axis
+TORUS_SAMPLES = 256  # facets (and vertices) a torus fit looks at, at most, ...
+TORUS_NEIGHBOURS = 6  # ... guessing the tube radius from each one's curvature towards this many nearest, ...
+TORUS_RANGE = (1e-3, 10.0)  # ... which lies between these x the patch's size (a sphere's circle, a cone's tube) ...
+TORUS_START = (
+    0.05  # ... and starting least squares from the best tube radius if the tube centres lie this near a circle
+)
+SPHERE_MAJOR = 0.05  # x the tube radius: a torus whose circle is smaller is a sphere
+TORUS_TOLERANCE = 1e-4  # x the tube radius (or the patch's size if smaller): how far a vertex may lie off the
+# torus (a CAD export's vertices lie on it but for rounding, 1e-6 on the corpus; a narrow chamfer, a cone, lies
+# within 1e-3 of a torus of huge tube)
+FLOAT32 = 1e-6  # x the largest coordinate: an STL's float32 rounding, added to that
+TUBE_STEP = 1e-3  # radians round a torus's tube: its vertices lie on three circles this far apart or more
+TORUS_STEPS = 30  # evaluations of a torus fit's least squares at most (corpus tori: 3-4; spherical corners: 8-25)
+HALF_TURN = 170.0  # degrees round its tube: a concave torus turning less is a fillet, one turning more a bent bore
+CYLINDER_AGREE = 1e-2  # two bends lie on one cylinder when their axes (sine of the angle), axis lines and radii
+# (x the radius) agree this closely (exact but for rounding on a CAD tessellation's ruled cylinder)
+MAX_STRIP_BENDS = 16  # a facet strip bent against more neighbours than this is no cylinder's
+BAND_LENGTH = 2.0  # a cylinder next to one of its radius at an angle is a torus's band unless this x as long
+MIN_SWEEP = 30.0  # degrees: a cylinder found inside a smooth patch turns at least this far round its axis (a few
+# facets of a torus's irregular tessellation agree on a cylinder turning 10)
 
 
 def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.ndarray, source: str) -> list[np.ndarray]:
@@ -384,9 +434,11 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
 
     First its planar regions (coplanar faces, wide against the facets they bend
     into: :func:`_wide`); then the rest is cut where a crease fades out in it
-    (:func:`_continued_creases`), and each connected rest is one piece if it lies
-    on a cylinder or can be flattened (:func:`flattenable`), else it is halved
-    across its widest spread of normals until every piece can.
+    (:func:`_continued_creases`); a connected rest that does not lie on one cylinder gives up
+    the cylinders inside it (:func:`_cylinder_regions`: a hole's wall that runs into a
+    tangent fillet, a block's rounds between its corner blends); then each connected rest
+    is one piece if it lies on a cylinder or can be flattened (:func:`flattenable`), else
+    it is halved across its widest spread of normals until every piece can.
     ``smooth`` marks the mesh's face-adjacency pairs that are not feature edges. A piece still
     neither after MAX_SPLITS halvings is refused (GeometryError naming ``source``), before any packing.
     """
@@ -409,7 +461,10 @@ def chart_pieces(mesh, faces: np.ndarray, face_patch: np.ndarray, smooth: np.nda
     keep[np.flatnonzero(keep)[_continued_creases(mesh, rest, rows[keep], creases)]] = False
     labels = _components(n, pairs[keep])
     for r in np.unique(labels[rest]):
-        pieces += _split_by_normals(mesh, np.flatnonzero((labels == r) & rest), pairs[keep], source)
+        cylinders, parts = _cylinders_apart(mesh, np.flatnonzero((labels == r) & rest), region, pairs[keep])
+        pieces += cylinders
+        for part in parts:
+            pieces += _split_by_normals(mesh, part, pairs[keep], source)
     return pieces
 
 
@@ -503,6 +558,171 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
     width = np.bincount(region, weights=area, minlength=count) / np.maximum(border, 1e-300)
     return (width > WIDE * beyond) & (np.bincount(region, minlength=count) > 1)
+
+
+def _cylinders_apart(mesh, piece: np.ndarray, strip: np.ndarray, pairs: np.ndarray):
+    """(cylinders, parts): the cylinders inside a connected smooth ``piece`` of faces that does not lie on one
+    cylinder as a whole (:func:`_cylinder_regions`; ``strip`` and ``pairs`` as there), and the connected parts
+    of it left over; ([], [piece]) when it lies on one (a Gmsh-meshed fillet's triangles cross its lines and
+    tilt: its bends agree on no axis, and pieces of it would) or holds none."""
+    vertices = mesh.vertices[np.unique(mesh.faces[piece])]
+    if fit_cylinder(mesh.triangles_center[piece], mesh.face_normals[piece], vertices) is not None:
+        return [], [piece]
+    inside = np.zeros(len(mesh.faces), bool)
+    inside[piece] = True
+    cylinders = _cylinder_regions(mesh, inside, strip, pairs)
+    for cylinder in cylinders:
+        inside[cylinder] = False
+    left = _components(len(mesh.faces), pairs[inside[pairs].all(axis=1)])
+    return cylinders, [np.flatnonzero((left == k) & inside) for k in np.unique(left[inside])]
+
+
+def _cylinder_regions(mesh, rest: np.ndarray, strip: np.ndarray, pairs: np.ndarray) -> list[np.ndarray]:
+    """The faces of the ``rest`` mask that lie on cylinders, one array per cylinder (connected): a hole's wall
+    that runs into a tangent fillet at its rim, which the patch would otherwise carry as one chart with the
+    fillet and no cylinder (no 'hole' to place a pattern on). ``strip``: coplanar region label of every face;
+    ``pairs``: the smooth face pairs among them.
+
+    Each candidate of :func:`_cylinder_candidates` that is no torus band (:func:`_torus_bands`) takes every
+    face of ``rest`` connected to it whose vertices lie on its cylinder and whose normal tilts off its axis
+    no more than its own faces' do (at least COPLANAR): the first band of a fillet, whose facets tilt by
+    half the fillet's angular step, stays out. It is kept if that makes a plain piece of a cylinder
+    (:func:`_plain_cylinder`)."""
+    candidates = _cylinder_candidates(mesh, rest, strip, pairs)
+    band = _torus_bands(candidates, pairs, len(mesh.faces))
+    in_rest = np.flatnonzero(rest)
+    normals, corners = mesh.face_normals[in_rest], mesh.vertices[mesh.faces[in_rest]]
+    regions = []
+    taken = np.zeros(len(mesh.faces), bool)
+    for (faces, cylinder, _), is_band in zip(candidates, band):
+        if is_band or taken[faces].any():
+            continue
+        radial = corners - cylinder.point
+        radial -= (radial @ cylinder.axis)[..., None] * cylinder.axis
+        off = np.abs(np.linalg.norm(radial, axis=2) - cylinder.radius).max(axis=1)
+        tilt = np.abs(normals @ cylinder.axis)
+        on = np.zeros(len(mesh.faces), bool)
+        on[in_rest] = (off <= CIRCLE_TOLERANCE * cylinder.radius) & (
+            tilt <= max(COPLANAR, np.abs(mesh.face_normals[faces] @ cylinder.axis).max())
+        )
+        on &= ~taken
+        labels = _components(len(mesh.faces), pairs[on[pairs].all(axis=1)])
+        region = np.flatnonzero(on & np.isin(labels, labels[faces]))
+        if _plain_cylinder(mesh, region, cylinder):
+            taken[region] = True
+            regions.append(region)
+    return regions
+
+
+def _cylinder_candidates(mesh, rest: np.ndarray, strip: np.ndarray, pairs: np.ndarray) -> list[tuple]:
+    """(faces, cylinder, length along its axis) of each group of facet strips of ``rest`` that lies on one
+    cylinder (arguments as :func:`_cylinder_regions`).
+
+    Two strips bent against each other (a bend) meet along an edge that both their planes hold; on a
+    cylinder every such edge runs along the axis, and the circle through the edge and the two faces' third
+    vertices, seen along it, is the cylinder's. Bends are joined through the strips they share when their
+    directions, axis lines and radii agree (within CYLINDER_AGREE); a joined group is a candidate when its
+    bends and faces keep to one axis (a torus's rings round its own axis near the equators lean), its
+    vertices lie on one circle seen along it (:func:`_cylinder_about`) and it turns at least MIN_SWEEP."""
+    bends = np.flatnonzero(rest[pairs[:, 0]] & rest[pairs[:, 1]] & (strip[pairs[:, 0]] != strip[pairs[:, 1]]))
+    if len(bends) < 2:
+        return []
+    f, g = pairs[bends, 0], pairs[bends, 1]
+    shared = _shared_edges(mesh, pairs[bends])
+    direction = unit(mesh.vertices[shared[:, 1]] - mesh.vertices[shared[:, 0]])  # both faces' planes hold it
+    direction *= np.sign(direction[np.arange(len(direction)), np.argmax(np.abs(direction), axis=1)])[:, None]
+    far = [mesh.faces[side].sum(axis=1) - shared.sum(axis=1) for side in (f, g)]  # each face's third vertex
+    on_axis, radius = _circumcircle(
+        mesh.vertices[shared[:, 0]], mesh.vertices[far[0]], mesh.vertices[far[1]], direction
+    )
+    # bends meeting one strip, each with each (strips of a cylinder or a torus band have two to four)
+    incident = np.concatenate([strip[f], strip[g]])
+    bend = np.concatenate([np.arange(len(bends))] * 2)
+    order = np.argsort(incident, kind="stable")
+    incident, bend = incident[order], bend[order]
+    starts = np.flatnonzero(np.r_[True, incident[1:] != incident[:-1]])
+    counts = np.diff(np.r_[starts, len(incident)])
+    links = [np.zeros((0, 2), np.int64)]
+    for k in np.unique(counts[(counts >= 2) & (counts <= MAX_STRIP_BENDS)]):
+        members = bend[starts[counts == k][:, None] + np.arange(k)]
+        i, j = np.triu_indices(k, 1)
+        links.append(np.column_stack([members[:, i].ravel(), members[:, j].ravel()]))
+    a, b = np.concatenate(links).T
+    scale = np.maximum(radius[a], radius[b])
+    agree = (
+        (np.linalg.norm(np.cross(direction[a], direction[b]), axis=1) < CYLINDER_AGREE)
+        & (np.linalg.norm(on_axis[a] - on_axis[b], axis=1) < CYLINDER_AGREE * scale)
+        & (np.abs(radius[a] - radius[b]) < CYLINDER_AGREE * scale)
+    )
+    group = _components(len(bends), np.column_stack([a, b])[agree])
+    by_group = np.argsort(group, kind="stable")
+    group_start = np.searchsorted(group[by_group], np.arange(group.max() + 2))
+    in_rest = np.flatnonzero(rest)
+    by_strip = in_rest[np.argsort(strip[in_rest], kind="stable")]  # the rest's faces, strip by strip
+    strip_start = np.searchsorted(strip[by_strip], np.arange(strip.max() + 2))
+    candidates = []
+    for label in np.flatnonzero(np.diff(group_start) >= 2):
+        members = by_group[group_start[label] : group_start[label + 1]]
+        axis = unit(direction[members].sum(axis=0))
+        if np.linalg.norm(np.cross(direction[members], axis), axis=1).max() >= CYLINDER_AGREE:
+            continue
+        touched = np.unique(np.concatenate([strip[f[members]], strip[g[members]]]))
+        faces = np.sort(np.concatenate([by_strip[strip_start[k] : strip_start[k + 1]] for k in touched]))
+        if np.abs(mesh.face_normals[faces] @ axis).max() >= CYLINDER_AGREE:
+            continue
+        vertices = mesh.vertices[np.unique(mesh.faces[faces])]
+        cylinder = _cylinder_about(axis, mesh.triangles_center[faces], mesh.face_normals[faces], vertices)
+        if cylinder is not None and cylinder.sweep >= MIN_SWEEP:
+            candidates.append((faces, cylinder, float(np.ptp((vertices - cylinder.point) @ cylinder.axis))))
+    return candidates
+
+
+def _torus_bands(candidates: list[tuple], pairs: np.ndarray, count: int) -> np.ndarray:
+    """Per candidate of :func:`_cylinder_candidates`, whether it is one band of a torus's tessellation. A
+    torus (a fillet round a hole's rim) is a family of candidates, each of the tube's radius with a turned
+    axis: a candidate that shares or borders faces (joined by ``pairs``, of ``count`` faces in all) with
+    another of its radius at an angle is a band unless it is BAND_LENGTH times as long (a straight fillet
+    ending at a corner blend)."""
+    band = np.zeros(len(candidates), bool)
+    if not candidates:
+        return band
+    rows = np.concatenate([faces for faces, _, _ in candidates])
+    cols = np.repeat(np.arange(len(candidates)), [len(faces) for faces, _, _ in candidates])
+    member = sparse.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, len(candidates)))
+    near = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    touching = sparse.triu(member.T @ (near + near.T + sparse.identity(count)) @ member, k=1).tocoo()
+    for i, j in zip(touching.row, touching.col):
+        (_, ci, li), (_, cj, lj) = candidates[i], candidates[j]
+        if abs(ci.radius - cj.radius) < CYLINDER_AGREE * max(ci.radius, cj.radius) and (
+            np.linalg.norm(np.cross(ci.axis, cj.axis)) >= CYLINDER_AGREE
+        ):
+            band[i] |= li < BAND_LENGTH * lj
+            band[j] |= lj < BAND_LENGTH * li
+    return band
+
+
+def _plain_cylinder(mesh, faces: np.ndarray, cylinder: Cylinder) -> bool:
+    """Whether ``faces`` (connected, on ``cylinder``) make a plain piece of it: a full turn a band (two border
+    loops: Euler characteristic 0), else a disk that flattens without folding (:func:`flattenable`). A boss's
+    wall that a tangent-filleted arm joins is neither: a full turn with a window whose corners are cusps,
+    left to the charts, which cut it at the folds."""
+    triangles = mesh.faces[faces]
+    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    euler = len(np.unique(triangles)) - len(edges) + len(faces)
+    return euler == 0 if cylinder.full_turn else euler == 1 and flattenable(mesh, faces)
+
+
+def _circumcircle(p: np.ndarray, q: np.ndarray, r: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and radius of the circle through points ``p``, ``q``, ``r`` (k, 3) seen along unit ``axis``
+    (k, 3): the centre is the point of the axis line nearest the origin (inf where the three are in line)."""
+    flat = lambda x: x - np.einsum("ij,ij->i", x, axis)[:, None] * axis  # noqa: E731
+    p, a, b = flat(p), flat(q - p), flat(r - p)
+    normal = np.cross(a, b)
+    area = np.einsum("ij,ij->i", normal, normal)
+    offset = np.cross((a * a).sum(axis=1)[:, None] * b - (b * b).sum(axis=1)[:, None] * a, normal)
+    offset /= np.maximum(2 * area, 1e-300)[:, None]
+    radius = np.where(area > 0, np.linalg.norm(offset, axis=1), np.inf)
+    return p + offset, radius
 
 
 def _components(n: int, pairs: np.ndarray) -> np.ndarray:
@@ -957,6 +1177,12 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
         return None
     if singular[2] > 1e-3 * singular[0]:  # facets across the axis lines tilt their normals: fit the vertices
         axis = _cylinder_axis(vertices, axis)
+    return _cylinder_about(axis, face_centres, face_normals, vertices)
+
+
+def _cylinder_about(axis: np.ndarray, face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.ndarray):
+    """The cylinder round unit ``axis`` that faces (centres and normals (k, 3)) and their ``vertices`` lie on,
+    or None if a vertex strays from one circle seen along it."""
     circle = fit_circle_projected(vertices, axis)
     if circle is None:
         return None
@@ -969,6 +1195,105 @@ def fit_cylinder(face_centres: np.ndarray, face_normals: np.ndarray, vertices: n
     if axis[np.argmax(np.abs(axis))] < 0:
         axis = -axis
     return Cylinder(centre, axis, radius, concave, sweep(around, axis))
+
+
+def fit_torus(face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.ndarray) -> Torus | None:
+    """The torus a patch lies on, or None: every vertex within TORUS_TOLERANCE x the smaller of its tube radius
+    and the patch's size (and float32 rounding), on three circles round the axis or more (two, a narrow
+    chamfer's, lie on tori of every tube radius), the tube no wider than TORUS_RANGE[1] x that size (a cone is
+    the limit of ever larger tori) and its circle not shrunk to a point (a sphere).
+
+    Its facets' centres moved along their normals by the tube radius, toward the tube's centre, make one
+    circle. The tube radius is guessed from the facets' curvature (TORUS_SAMPLES of them), searched within a
+    factor 2 of that for either side of the surface, and if the tube centres then lie within TORUS_START x
+    the tube radius of their circle the torus is fitted to the vertices by least squares (scipy). Faces and
+    vertices as for :func:`fit_cylinder`."""
+    from scipy.optimize import least_squares, minimize_scalar
+
+    if len(face_normals) < 9:
+        return None
+    size = float(np.ptp(vertices, axis=0).max())
+    rng = np.random.default_rng(0)  # a random sample: every k-th facet of a torus's grid lies at one tube angle
+    sample = np.sort(rng.choice(len(face_centres), min(TORUS_SAMPLES, len(face_centres)), replace=False))
+    centres, normals = face_centres[sample], face_normals[sample]
+
+    def ring(signed):  # (rms distance of the tube centres from their circle / tube radius, centre, axis, R)
+        tube = centres - signed * normals
+        axis = np.linalg.svd(tube - tube.mean(axis=0), full_matrices=False)[2][2]
+        circle = fit_circle_projected(tube, axis, tolerance=np.inf)
+        if circle is None or circle[1] < TORUS_RANGE[0] * size:  # tube centres in one point: a sphere
+            return np.inf, None, None, None
+        rel = tube - circle[0]
+        along = rel @ axis
+        off = np.hypot(np.linalg.norm(rel - np.outer(along, axis), axis=1) - circle[1], along)
+        return float(np.sqrt(np.mean(off**2)) / abs(signed)), circle[0], axis, circle[1]
+
+    # the tube radius, about: the largest curvature between each facet and its nearest sampled neighbours
+    near = cKDTree(centres).query(centres, k=min(TORUS_NEIGHBOURS + 1, len(centres)))[1][:, 1:]
+    chord = np.linalg.norm(centres[near] - centres[:, None], axis=2)
+    turn = np.linalg.norm(normals[near] - normals[:, None], axis=2)  # 2 sin(angle / 2)
+    guess = 1.0 / np.median((turn / np.maximum(chord, 1e-300)).max(axis=1))
+    if not np.isfinite(guess) or guess > TORUS_RANGE[1] * size:
+        return None
+    fits = {
+        sign: minimize_scalar(lambda r, sign=sign: ring(sign * r)[0], bounds=(guess / 2, 2 * guess), method="bounded")
+        for sign in (1.0, -1.0)
+    }
+    sign = min(fits, key=lambda k: fits[k].fun)
+    best = sign * fits[sign].x
+    misfit, centre, axis, major = ring(best)
+    if not misfit < TORUS_START or _tube_circles(vertices, centre, axis, major) < 3:
+        return None  # (on two circles, a narrow chamfer's vertices lie on tori of every tube radius)
+    u = _any_perpendicular(axis)
+    v = np.cross(axis, u)
+    points = vertices[np.sort(rng.choice(len(vertices), min(TORUS_SAMPLES, len(vertices)), replace=False))]
+
+    def unpack(x):
+        a = axis + x[3] * u + x[4] * v
+        return centre + x[:3], a / np.linalg.norm(a), x[5], x[6]
+
+    def distances(x, at=points):
+        c, a, big, small = unpack(x)
+        rel = at - c
+        along = rel @ a
+        return np.hypot(np.linalg.norm(rel - np.outer(along, a), axis=1) - big, along) - small
+
+    found = least_squares(distances, [0, 0, 0, 0, 0, major, abs(best)], x_scale="jac", max_nfev=TORUS_STEPS)
+    torus_centre, torus_axis, major, minor = unpack(found.x)
+    if not (SPHERE_MAJOR * minor < major and 0 < minor <= TORUS_RANGE[1] * size):
+        return None
+    tolerance = TORUS_TOLERANCE * min(minor, size) + FLOAT32 * np.abs(vertices).max()
+    if np.abs(distances(found.x, vertices)).max() > tolerance:
+        return None
+    if torus_axis[np.argmax(np.abs(torus_axis))] < 0:
+        torus_axis = -torus_axis
+    return Torus(torus_centre, torus_axis, float(major), float(minor), concave=bool(best < 0))
+
+
+def _tube_circles(vertices: np.ndarray, centre: np.ndarray, axis: np.ndarray, major: float) -> int:
+    """On how many circles round ``axis`` ``vertices`` (k, 3) lie, told apart by their angle round the tube of a
+    torus of circle ``major`` about ``centre`` (at least TUBE_STEP apart)."""
+    rel = vertices - centre
+    along = rel @ axis
+    section = np.arctan2(along, np.linalg.norm(rel - np.outer(along, axis), axis=1) - major)
+    return len(np.unique(np.round(section / TUBE_STEP)))
+
+
+def tube_sweep(torus, points: np.ndarray) -> float:
+    """The angle (degrees) round the tube of ``torus`` (``centre``, ``axis``, ``major``) that ``points`` (k, 3)
+    on it cover."""
+    rel = points - torus.centre
+    along = rel @ torus.axis
+    radial = rel - np.outer(along, torus.axis)
+    distance = np.linalg.norm(radial, axis=1)
+    section = np.column_stack([distance - torus.major, along, np.zeros(len(rel))])
+    return sweep(section, np.array([0.0, 0.0, 1.0]))
+
+
+def torus_kind(turn: float) -> str:
+    """The kind of a concave torus turning ``turn`` degrees round its tube: less than HALF_TURN a fillet (a
+    hole's rim rounded into a face), more a bent bore ('hole')."""
+    return "hole" if turn > HALF_TURN else "fillet"
 
 
 def sweep(radial: np.ndarray, axis: np.ndarray) -> float:

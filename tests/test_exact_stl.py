@@ -83,3 +83,39 @@ def test_one_surface_in_several_patches_is_one_surface():
     assert not same_surface(cone, sphere, tolerance) and not same_surface(Plane(np.zeros(3), axis), cone, tolerance)
     # a cone's radius of curvature across its generators: distance from the axis / cos(half-angle)
     assert radius_across(cone, np.array([[2.0, 0.0, 4.0]]))[0] == pytest.approx(2.0 / np.cos(0.5))
+
+
+def _torus_stl(tmp_path, inside_out: bool = False) -> trimesh.Trimesh:
+    torus = trimesh.creation.torus(major_radius=20.0, minor_radius=5.0, major_sections=128, minor_sections=48)
+    if inside_out:
+        torus.invert()
+    return torus
+
+
+def test_a_torus_is_fitted_to_its_facets_and_a_sphere_or_cone_is_not(tmp_path):
+    """fit_torus finds the tube (5) and circle (20) of a faceted torus, convex as a ring, concave as a fillet
+    (the material outside the tube: the faces turned inside out); a sphere and a cone, limits of tori, fit
+    none (a cone's two rings of vertices lie on tori of every tube radius)."""
+    from engine.features import fit_torus
+
+    for inside_out in (False, True):
+        mesh = _torus_stl(tmp_path, inside_out)
+        torus = fit_torus(mesh.triangles_center, mesh.face_normals, mesh.vertices)
+        assert torus is not None and torus.concave == inside_out
+        assert torus.major == pytest.approx(20.0, rel=1e-9) and torus.minor == pytest.approx(5.0, rel=1e-9)
+        assert abs(torus.axis[2]) == pytest.approx(1.0) and np.linalg.norm(torus.centre) < 1e-9
+    for other in (trimesh.creation.icosphere(4, 7.0), trimesh.creation.cone(5.0, 8.0, sections=64)):
+        assert fit_torus(other.triangles_center, other.face_normals, other.vertices) is None
+
+
+def test_a_fine_stl_torus_is_the_exact_torus(tmp_path):
+    """Every patch of a finely faceted torus (sagitta 0.011, 0.005 of the size 2) lies on the torus its facets
+    fit, and the mesh's surface nodes go onto it (before: they stayed on the facets)."""
+    _torus_stl(tmp_path).export(tmp_path / "ring.stl")
+    job = {"geometry": {"file": "ring.stl"}, "size": 2.0, "output": {"formats": ["vtu"]}}
+    (tmp_path / "job.yaml").write_text(yaml.safe_dump(job))
+    result = run(load_job(tmp_path / "job.yaml"), write=False)
+    assert all(p.torus is not None and not p.torus.concave for p in result.features.patches)
+    x = result.mesh.points[np.unique(result.mesh.boundary)]
+    tube = np.hypot(np.linalg.norm(x[:, :2], axis=1) - 20.0, x[:, 2])
+    assert len(x) > 1000 and np.abs(tube - 5.0).max() < 1e-6 * 5.0

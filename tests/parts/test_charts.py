@@ -180,3 +180,62 @@ def test_a_drill_point_is_one_chart_and_its_rim_one_circle(drilled_blind_hole, t
         and np.allclose(np.hypot(*(c.points[:, :2] - 20).T), DRILL_RADIUS, atol=1e-3)
     ]
     assert len(rims) == 1 and rims[0].closed
+
+
+@pytest.fixture(scope="module")
+def tangent_cylinder_parts(tmp_path_factory):
+    names = ["filleted_hole_floor", "fillet_block", "torus_ring", "flange"]
+    return make_parts.make_parts(tmp_path_factory.mktemp("tangent"), names)
+
+
+def _cylinders(path):
+    features = detect_features(load_surface(path))
+    return features, [p for p in features.patches if p.cylinder is not None]
+
+
+@pytest.mark.parametrize("tessellation", ["coarse", "fine"])
+def test_a_hole_wall_running_into_a_rim_fillet_is_a_cylinder_patch(tangent_cylinder_parts, tessellation):
+    """filleted_hole_floor: two through holes (r 7, z 0..18) whose rims meet the pocket floor (z 18) through
+    tangent fillets (r 3, z 15..18). Each wall is a patch on its own full-turn concave cylinder (a 'hole'),
+    all of the wall and nothing of the fillet; before, wall and fillet were one smooth surface cut into
+    three charts, none of them a cylinder."""
+    features, cylinders = _cylinders(tangent_cylinder_parts["filleted_hole_floor"][tessellation])
+    walls = [p for p in cylinders if p.cylinder.full_turn and p.cylinder.concave]
+    assert len(walls) == 2
+    for patch in walls:
+        assert patch.cylinder.radius == pytest.approx(7.0, rel=1e-3)
+        assert abs(patch.cylinder.axis[2]) == pytest.approx(1.0, abs=1e-6)
+        assert patch.area == pytest.approx(2 * np.pi * 7.0 * 15.0, rel=1e-2)  # the wall, z 0..15
+        assert patch.vertices[:, 2].max() == pytest.approx(15.0, abs=1e-6)
+    assert sorted(round(float(p.cylinder.point[0])) for p in walls) == [35, 65]
+
+
+@pytest.mark.parametrize("tessellation", ["coarse", "fine"])
+def test_rounds_between_faces_and_a_torus_alone(tangent_cylinder_parts, tessellation):
+    """fillet_block: a block with every edge rounded (r 5) and a bore (r 8). Each of the twelve straight
+    rounds, tangent to both faces and to the corner blends, is a patch on a quarter cylinder of radius 5;
+    the corner blends (spheres) and a torus ring carry no cylinder."""
+    features, cylinders = _cylinders(tangent_cylinder_parts["fillet_block"][tessellation])
+    rounds = [p for p in cylinders if not p.cylinder.concave]
+    assert len(rounds) == 12
+    for patch in rounds:
+        assert patch.cylinder.radius == pytest.approx(5.0, rel=1e-3)
+        assert patch.cylinder.sweep == pytest.approx(90.0, abs=3.0)
+    bore = [p for p in cylinders if p.cylinder.concave]
+    assert len(bore) == 1 and bore[0].cylinder.radius == pytest.approx(8.0, rel=1e-3)
+    assert _cylinders(tangent_cylinder_parts["torus_ring"][tessellation])[1] == []
+
+
+@pytest.mark.parametrize("tessellation", ["coarse", "fine"])
+def test_blends_round_an_axis_are_tori_and_a_concave_one_is_a_fillet(tangent_cylinder_parts, tessellation):
+    """The flange's hub (r 30) meets its disc through a fillet r 4: a concave torus (circle 34, tube 4), a
+    'fillet' of radius 4 as a CAD torus face is; filleted_hole_floor's hole rims are rounds (r 3 round holes
+    of r 7): convex tori of circle 10, no kind."""
+    features, _ = _cylinders(tangent_cylinder_parts["flange"][tessellation])
+    (fillet,) = [p for p in features.patches if p.torus is not None]
+    assert fillet.torus.concave and fillet.kinds == ["fillet"] and fillet.circle.radius == pytest.approx(4.0)
+    assert (fillet.torus.major, fillet.torus.minor) == pytest.approx((34.0, 4.0), rel=1e-6)
+    features, _ = _cylinders(tangent_cylinder_parts["filleted_hole_floor"][tessellation])
+    rims = [p for p in features.patches if p.torus is not None]
+    assert len(rims) == 2 and all(not p.torus.concave and not p.kinds for p in rims)
+    assert [p.torus.major for p in rims] + [p.torus.minor for p in rims] == pytest.approx([10, 10, 3, 3], rel=1e-6)
