@@ -302,25 +302,49 @@ def detect_features(
         truly_sharp[sharp],
         threshold,
     )
+    cylinders = faceted_cylinders(mesh, patches, face_patch, sharp)
     return Features(
         corners=corners,
         curves=[c if c.sharp else _unzigzagged(c) for c in curves],
-        patches=[_toroidal(mesh, p) if tori else p for p in faceted_cylinders(mesh, patches, face_patch, sharp)],
+        patches=_with_tori(mesh, cylinders) if tori else cylinders,
         face_patch=face_patch,
         feature_angle=feature_angle,
     )
 
 
-def _toroidal(mesh, patch: Patch) -> Patch:
-    """``patch`` with the torus its facets fit (:func:`fit_torus`), if it is curved, on no cylinder, and fits one:
-    its tube circle and, concave, the kind a CAD torus gets (:func:`torus_kind`: a rim fillet round a hole)."""
-    if patch.planar or patch.cylinder is not None:
-        return patch
-    torus = fit_torus(mesh.triangles_center[patch.faces], mesh.face_normals[patch.faces], patch.vertices)
-    if torus is None:
-        return patch
-    kinds = [*patch.kinds, torus_kind(tube_sweep(torus, patch.vertices))] if torus.concave else patch.kinds
-    return replace(patch, torus=torus, circle=Circle(torus.centre, torus.axis, torus.minor), kinds=kinds)
+def _with_tori(mesh, patches: list) -> list:
+    """``patches`` with the torus each curved patch on no cylinder fits (:func:`fit_torus`), its tube circle and,
+    concave, the kind a CAD torus face gets (:func:`torus_kind`) by the turn round the tube of all the patches
+    on that torus: the charts of a bent bore's wall, each less than half a turn round it, make a 'hole'."""
+    tori = [
+        None
+        if p.planar or p.cylinder is not None
+        else fit_torus(mesh.triangles_center[p.faces], mesh.face_normals[p.faces], p.vertices)
+        for p in patches
+    ]
+    out = list(patches)
+    for k, torus in enumerate(tori):
+        if torus is None:
+            continue
+        kinds = patches[k].kinds
+        if torus.concave:
+            same = [j for j, other in enumerate(tori) if other is not None and _same_torus(torus, other)]
+            turn = tube_sweep(torus, np.concatenate([patches[j].vertices for j in same]))
+            kinds = [*kinds, torus_kind(turn)]
+        out[k] = replace(patches[k], torus=torus, circle=Circle(torus.centre, torus.axis, torus.minor), kinds=kinds)
+    return out
+
+
+def _same_torus(a: Torus, b: Torus) -> bool:
+    """Whether two fitted tori are one surface (centres, circles and tubes within TORUS_TOLERANCE x the tube)."""
+    tolerance = TORUS_TOLERANCE * 10 * min(a.minor, b.minor)
+    return bool(
+        a.concave == b.concave
+        and np.linalg.norm(a.centre - b.centre) < tolerance
+        and np.linalg.norm(np.cross(a.axis, b.axis)) * a.major < tolerance
+        and abs(a.major - b.major) < tolerance
+        and abs(a.minor - b.minor) < tolerance
+    )
 
 
 def faceted_cylinders(mesh, patches: list, face_patch: np.ndarray, sharp: np.ndarray) -> list:

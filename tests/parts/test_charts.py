@@ -239,3 +239,40 @@ def test_blends_round_an_axis_are_tori_and_a_concave_one_is_a_fillet(tangent_cyl
     rims = [p for p in features.patches if p.torus is not None]
     assert len(rims) == 2 and all(not p.torus.concave and not p.kinds for p in rims)
     assert [p.torus.major for p in rims] + [p.torus.minor for p in rims] == pytest.approx([10, 10, 3, 3], rel=1e-6)
+
+
+@pytest.fixture(scope="module")
+def elbow(tmp_path_factory):
+    """A quarter of a bent tube (circle 40, outside tube 10, bore 6) at both tessellations."""
+    import gmsh
+
+    occ = gmsh.model.occ
+    out = tmp_path_factory.mktemp("elbow")
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    paths = {}
+    try:
+        for tessellation, (angle, linear) in make_parts.TESSELLATIONS.items():
+            gmsh.clear()
+            make_parts._cut(
+                occ.addTorus(0, 0, 0, 40, 10, angle=np.pi / 2), occ.addTorus(0, 0, 0, 40, 6, angle=np.pi / 2)
+            )
+            occ.synchronize()
+            paths[tessellation] = out / f"elbow-{tessellation}.stl"
+            make_parts._export(paths[tessellation], angle, linear * 80.0)
+            make_parts._clean(paths[tessellation])
+    finally:
+        gmsh.finalize()
+    return paths
+
+
+@pytest.mark.parametrize("tessellation", ["coarse", "fine"])
+def test_a_bent_bore_cut_into_charts_is_a_hole(elbow, tessellation):
+    """The bore's wall turns all the way round its tube; the charts it is cut into turn less than half way
+    each. The kind goes by the turn of all the patches on the one torus, as for a CAD torus face: 'hole', not
+    'fillet' (each chart alone was a 'fillet'); the outside, convex, has no kind."""
+    features, _ = _cylinders(elbow[tessellation])
+    bore = [p for p in features.patches if p.torus is not None and p.torus.concave]
+    outside = [p for p in features.patches if p.torus is not None and not p.torus.concave]
+    assert len(bore) >= 2 and all(p.kinds == ["hole"] and p.torus.minor == pytest.approx(6.0) for p in bore)
+    assert outside and all(not p.kinds and p.torus.minor == pytest.approx(10.0) for p in outside)
