@@ -336,8 +336,9 @@ def _with_tori(mesh, patches: list) -> list:
 
 
 def _same_torus(a: Torus, b: Torus) -> bool:
-    """Whether two fitted tori are one surface (centres, circles and tubes within TORUS_TOLERANCE x the tube)."""
-    tolerance = TORUS_TOLERANCE * 10 * min(a.minor, b.minor)
+    """Whether two fitted tori are one surface: of one side, their centres, axes (at the circle), circles and
+    tubes within SAME_TORUS x the tube radius."""
+    tolerance = SAME_TORUS * min(a.minor, b.minor)
     return bool(
         a.concave == b.concave
         and np.linalg.norm(a.centre - b.centre) < tolerance
@@ -444,6 +445,7 @@ TORUS_TOLERANCE = 1e-4  # x the tube radius (or the patch's size if smaller): ho
 FLOAT32 = 1e-6  # x the largest coordinate: an STL's float32 rounding, added to that
 TUBE_STEP = 1e-3  # radians round a torus's tube: its vertices lie on three circles this far apart or more
 TORUS_STEPS = 30  # evaluations of a torus fit's least squares at most (corpus tori: 3-4; spherical corners: 8-25)
+SAME_TORUS = 1e-3  # x the tube radius: two patches' tori this close are one torus (fits agree to ~1e-6)
 HALF_TURN = 170.0  # degrees round its tube: a concave torus turning less is a fillet, one turning more a bent bore
 CYLINDER_AGREE = 1e-2  # two bends lie on one cylinder when their axes (sine of the angle), axis lines and radii
 # (x the radius) agree this closely (exact but for rounding on a CAD tessellation's ruled cylinder)
