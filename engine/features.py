@@ -1050,7 +1050,7 @@ def _patches(geometry: Geometry, smooth_pairs: np.ndarray):
         verts = mesh.vertices[np.unique(mesh.faces[faces])]
         planar = bool(
             np.abs((verts - centroid) @ normal).max() <= FLAT * geometry.scale
-            and np.all(normals[faces] @ normal > 1 - 1e-9)
+            and np.all(normals[faces] @ normal > np.cos(COPLANAR))  # a float32 sliver's normal strays by 4e-4
         )
         cylinder = None if planar else fit_cylinder(centres[faces], normals[faces], verts)
         patches.append(

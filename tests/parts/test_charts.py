@@ -276,3 +276,34 @@ def test_a_bent_bore_cut_into_charts_is_a_hole(elbow, tessellation):
     outside = [p for p in features.patches if p.torus is not None and not p.torus.concave]
     assert len(bore) >= 2 and all(p.kinds == ["hole"] and p.torus.minor == pytest.approx(6.0) for p in bore)
     assert outside and all(not p.kinds and p.torus.minor == pytest.approx(10.0) for p in outside)
+
+
+def test_a_flat_face_of_float32_slivers_is_a_plane(tmp_path):
+    """A bracket's gusset (a wedge fused onto a filleted angle) has a flat side faceted by OpenCASCADE into
+    long slivers, whose normals, from float32 vertices, stray by 4e-4 rad: the side was no plane (normals
+    within 1e-9 required) but a concave 'cylinder' of radius 7.6e5 turning 0.003 deg, so a 'fillet'."""
+    import gmsh
+
+    occ = gmsh.model.occ
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    try:
+        body = make_parts._fuse(occ.addBox(0, 0, 0, 80, 50, 8), occ.addBox(0, 0, 8, 8, 50, 50))
+        occ.synchronize()
+        inner = make_parts._curves(lambda b: np.allclose(b[[0, 3, 2, 5]], 8.0))
+        body = make_parts._fuse(make_parts._fillet(body, inner, 4), occ.addWedge(8, 21, 8, 40, 8, 40))
+        make_parts._cut(body, occ.addCylinder(55, 25, -1, 0, 0, 10, 6), occ.addCylinder(-1, 25, 35, 10, 0, 0, 5))
+        occ.synchronize()
+        angle, linear = make_parts.TESSELLATIONS["fine"]
+        make_parts._export(tmp_path / "bracket.stl", angle, linear * 110.7)
+        make_parts._clean(tmp_path / "bracket.stl")
+    finally:
+        gmsh.finalize()
+    geometry = load_surface(tmp_path / "bracket.stl")
+    features = detect_features(geometry)
+    for patch in features.patches:
+        if patch.cylinder is not None:
+            assert patch.cylinder.radius < geometry.scale, patch.id
+            continue
+        flat = np.abs((patch.vertices - patch.centroid) @ patch.normal).max() <= 1e-7 * geometry.scale
+        assert patch.planar == flat, patch.id
