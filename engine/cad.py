@@ -34,7 +34,8 @@ from scipy.sparse import csgraph
 
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
-from .features import Circle, Cylinder, Features, detect_features, sweep, torus_kind, tube_sweep, unit
+from .features import Features, detect_features, unit
+from .fitting import Circle, Cylinder, sweep, torus_kind, tube_sweep
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -904,7 +905,7 @@ def _face_kinds(patch, surface: Surface, geometry: Geometry, group: np.ndarray):
 def _cylinder(exact: CylinderSurface, centres: np.ndarray, normals: np.ndarray, vertices: np.ndarray) -> Cylinder:
     """The patch cylinder of triangles (``centres``, ``normals``, their ``vertices``) on ``exact``, concave when
     their normals point to its axis, its sweep the turn their centres and vertices cover (as
-    :func:`engine.features.fit_cylinder` tells from the facets)."""
+    :func:`engine.fitting.fit_cylinder` tells from the facets)."""
     axis = exact.axis if exact.axis[np.argmax(np.abs(exact.axis))] > 0 else -exact.axis
 
     def radial(points):

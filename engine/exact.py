@@ -242,8 +242,8 @@ def fit_surface(
     torus=None,
 ):
     """The Plane, CylinderSurface, Sphere, Cone or Torus all ``vertices`` (k, 3) lie on within ``tolerance``,
-    or None. ``cylinder`` and ``torus`` are the patch's fitted :class:`engine.features.Cylinder` (its axis) and
-    :class:`engine.features.Torus`, if any; the faces' ``normals`` and ``centres`` (f, 3), if given, allow a
+    or None. ``cylinder`` and ``torus`` are the patch's fitted :class:`engine.fitting.Cylinder` (its axis) and
+    :class:`engine.fitting.Torus`, if any; the faces' ``normals`` and ``centres`` (f, 3), if given, allow a
     cone."""
     if len(vertices) < 4:
         return None
@@ -255,7 +255,7 @@ def fit_surface(
         normal = np.linalg.svd(vertices - centre, full_matrices=False)[2][2]
         candidates.append(Plane(centre, normal))
     elif cylinder is not None:
-        from .features import fit_circle_projected
+        from .fitting import fit_circle_projected
 
         circle = fit_circle_projected(vertices, cylinder.axis)
         if circle is not None:

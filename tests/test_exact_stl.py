@@ -96,7 +96,7 @@ def test_a_torus_is_fitted_to_its_facets_and_a_sphere_or_cone_is_not(tmp_path):
     """fit_torus finds the tube (5) and circle (20) of a faceted torus, convex as a ring, concave as a fillet
     (the material outside the tube: the faces turned inside out); a sphere and a cone, limits of tori, fit
     none (a cone's two rings of vertices lie on tori of every tube radius)."""
-    from engine.features import fit_torus
+    from engine.fitting import fit_torus
 
     for inside_out in (False, True):
         mesh = _torus_stl(tmp_path, inside_out)

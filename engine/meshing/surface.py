@@ -23,7 +23,8 @@ from scipy.sparse import csgraph
 from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
-from ..features import conformal_map, coordinates, curve_sides, describe, widest_gap
+from ..features import conformal_map, coordinates, curve_sides, describe
+from ..fitting import widest_gap
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
