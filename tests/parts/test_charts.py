@@ -70,6 +70,27 @@ def test_no_patch_of_the_part_folds_when_flattened(boss_arm, tessellation):
 POCKET_FILLET = 1.5
 
 
+def _both_tessellations(out, name: str, build, diagonal: float):
+    """({tessellation: path of NAME-TESSELLATION.stl}, what ``build`` returned): the OpenCASCADE model ``build()``
+    makes, exported at both of the corpus's tessellations (sagitta relative to ``diagonal``)."""
+    import gmsh
+
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    paths, value = {}, None
+    try:
+        for tessellation, (angle, linear) in make_parts.TESSELLATIONS.items():
+            gmsh.clear()
+            value = build()
+            gmsh.model.occ.synchronize()
+            paths[tessellation] = out / f"{name}-{tessellation}.stl"
+            make_parts._export(paths[tessellation], angle, linear * diagonal)
+            make_parts._clean(paths[tessellation])
+    finally:
+        gmsh.finalize()
+    return paths, value
+
+
 @pytest.fixture(scope="module")
 def pocket_with_floor_fillets(tmp_path_factory):
     """A block with a pocket whose floor edges are filleted and whose vertical corners are sharp (a con-rod's
@@ -78,30 +99,19 @@ def pocket_with_floor_fillets(tmp_path_factory):
     import gmsh
 
     occ = gmsh.model.occ
-    out = tmp_path_factory.mktemp("pocket")
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    paths = {}
-    try:
-        for tessellation, (angle, linear) in make_parts.TESSELLATIONS.items():
-            gmsh.clear()
-            tool = occ.addBox(10, 8, 6, 40, 14, 10)
-            occ.synchronize()
-            floor = [c for _, c in gmsh.model.getBoundary([(3, tool)], oriented=False, combined=False)]
-            floor = [c for _, c in gmsh.model.getBoundary([(2, f) for f in floor], oriented=False, combined=False)]
-            edges = sorted({c for c in floor if make_parts._at_z(6)(occ.getBoundingBox(1, c))})
-            tool = make_parts._fillet(tool, edges, POCKET_FILLET)
-            block = make_parts._cut(occ.addBox(0, 0, 0, 60, 30, 12), tool)
-            occ.synchronize()
-            faces = gmsh.model.getBoundary([(3, block)], oriented=False)
-            area = sum(occ.getMass(2, t) for _, t in faces if gmsh.model.getType(2, t) == "Cylinder")
-            path = out / f"pocket-{tessellation}.stl"
-            make_parts._export(path, angle, linear * float(np.linalg.norm([60, 30, 12])))
-            make_parts._clean(path)
-            paths[tessellation] = path
-    finally:
-        gmsh.finalize()
-    return paths, area
+
+    def build():
+        tool = occ.addBox(10, 8, 6, 40, 14, 10)
+        occ.synchronize()
+        floor = [c for _, c in gmsh.model.getBoundary([(3, tool)], oriented=False, combined=False)]
+        floor = [c for _, c in gmsh.model.getBoundary([(2, f) for f in floor], oriented=False, combined=False)]
+        edges = sorted({c for c in floor if make_parts._at_z(6)(occ.getBoundingBox(1, c))})
+        block = make_parts._cut(occ.addBox(0, 0, 0, 60, 30, 12), make_parts._fillet(tool, edges, POCKET_FILLET))
+        occ.synchronize()
+        faces = gmsh.model.getBoundary([(3, block)], oriented=False)
+        return sum(occ.getMass(2, t) for _, t in faces if gmsh.model.getType(2, t) == "Cylinder")
+
+    return _both_tessellations(tmp_path_factory.mktemp("pocket"), "pocket", build, float(np.linalg.norm([60, 30, 12])))
 
 
 @pytest.mark.parametrize("tessellation", ["coarse", "fine"])
@@ -247,23 +257,11 @@ def elbow(tmp_path_factory):
     import gmsh
 
     occ = gmsh.model.occ
-    out = tmp_path_factory.mktemp("elbow")
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    paths = {}
-    try:
-        for tessellation, (angle, linear) in make_parts.TESSELLATIONS.items():
-            gmsh.clear()
-            make_parts._cut(
-                occ.addTorus(0, 0, 0, 40, 10, angle=np.pi / 2), occ.addTorus(0, 0, 0, 40, 6, angle=np.pi / 2)
-            )
-            occ.synchronize()
-            paths[tessellation] = out / f"elbow-{tessellation}.stl"
-            make_parts._export(paths[tessellation], angle, linear * 80.0)
-            make_parts._clean(paths[tessellation])
-    finally:
-        gmsh.finalize()
-    return paths
+
+    def build():
+        make_parts._cut(occ.addTorus(0, 0, 0, 40, 10, angle=np.pi / 2), occ.addTorus(0, 0, 0, 40, 6, angle=np.pi / 2))
+
+    return _both_tessellations(tmp_path_factory.mktemp("elbow"), "elbow", build, 80.0)[0]
 
 
 @pytest.mark.parametrize("tessellation", ["coarse", "fine"])
@@ -285,21 +283,16 @@ def test_a_flat_face_of_float32_slivers_is_a_plane(tmp_path):
     import gmsh
 
     occ = gmsh.model.occ
-    gmsh.initialize(["-noenv"], readConfigFiles=False)
-    gmsh.option.setNumber("General.Terminal", 0)
-    try:
+
+    def build():
         body = make_parts._fuse(occ.addBox(0, 0, 0, 80, 50, 8), occ.addBox(0, 0, 8, 8, 50, 50))
         occ.synchronize()
         inner = make_parts._curves(lambda b: np.allclose(b[[0, 3, 2, 5]], 8.0))
         body = make_parts._fuse(make_parts._fillet(body, inner, 4), occ.addWedge(8, 21, 8, 40, 8, 40))
         make_parts._cut(body, occ.addCylinder(55, 25, -1, 0, 0, 10, 6), occ.addCylinder(-1, 25, 35, 10, 0, 0, 5))
-        occ.synchronize()
-        angle, linear = make_parts.TESSELLATIONS["fine"]
-        make_parts._export(tmp_path / "bracket.stl", angle, linear * 110.7)
-        make_parts._clean(tmp_path / "bracket.stl")
-    finally:
-        gmsh.finalize()
-    geometry = load_surface(tmp_path / "bracket.stl")
+
+    paths, _ = _both_tessellations(tmp_path, "bracket", build, 110.7)
+    geometry = load_surface(paths["fine"])
     features = detect_features(geometry)
     for patch in features.patches:
         if patch.cylinder is not None:
