@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .fitting import fit_circle_projected
 from .levels import Level
 from .quality import tet_quality
 
@@ -255,8 +256,6 @@ def fit_surface(
         normal = np.linalg.svd(vertices - centre, full_matrices=False)[2][2]
         candidates.append(Plane(centre, normal))
     elif cylinder is not None:
-        from .fitting import fit_circle_projected
-
         circle = fit_circle_projected(vertices, cylinder.axis)
         if circle is not None:
             candidates.append(CylinderSurface(circle[0], cylinder.axis, circle[1]))
@@ -516,7 +515,7 @@ def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube
         solution, *_ = np.linalg.lstsq(matrix, (points**2).sum(axis=1), rcond=None)
         yield Sphere(solution[:3], float(np.sqrt(max(solution[3] + solution[:3] @ solution[:3], 0.0))))
         axis = np.linalg.svd(normals, full_matrices=False)[2][2]
-        circle = _circle_across(points, axis)
+        circle = fit_circle_projected(points, axis, tolerance=np.inf)
         if circle is not None:
             yield CylinderSurface(circle[0], axis, circle[1])
         cone = fit_cone(points, normals, points)
@@ -531,7 +530,7 @@ def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube
                 spread, vt = np.linalg.svd(tube - middle, full_matrices=False)[1:]
                 if spread[1] <= tolerance:  # the tube centres are one point: a sphere
                     continue
-                ring = _circle_across(tube, vt[2])
+                ring = fit_circle_projected(tube, vt[2], tolerance=np.inf)
                 if ring is not None:
                     yield Torus(ring[0], vt[2], ring[1], float(radius))
 
@@ -544,16 +543,3 @@ def fit_analytic(points: np.ndarray, normals: np.ndarray, tolerance: float, tube
         return None
     best = min(error for _, error in fitting)
     return next(surface for surface, error in fitting if error <= max(CLOSER * best, EXACT_FIT * tolerance))
-
-
-def _circle_across(points: np.ndarray, axis: np.ndarray):
-    """(centre, radius) of the least-squares circle of ``points`` seen along ``axis``, or None."""
-    u = np.cross(axis, np.eye(3)[np.argmin(np.abs(axis))])
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
-    origin = points.mean(axis=0)
-    xy = np.column_stack([(points - origin) @ u, (points - origin) @ v])
-    matrix = np.column_stack([2 * xy, np.ones(len(xy))])
-    (cx, cy, c), *_ = np.linalg.lstsq(matrix, (xy**2).sum(axis=1), rcond=None)
-    radius = c + cx**2 + cy**2
-    return (origin + cx * u + cy * v, float(np.sqrt(radius))) if radius > 0 else None

@@ -544,13 +544,13 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
 
 
 def _cylinders_apart(mesh, piece: np.ndarray, strip: np.ndarray, pairs: np.ndarray):
-    """(cylinders, parts): the cylinders inside a connected smooth ``piece`` of faces that does not lie on one
-    cylinder as a whole (:func:`_cylinder_regions`; ``strip`` and ``pairs`` as there), and the connected parts
-    of it left over; ([], [piece]) when it lies on one (a Gmsh-meshed fillet's triangles cross its lines and
-    tilt: its bends agree on no axis, and pieces of it would) or holds none."""
+    """(cylinders, parts): the cylinders inside a connected smooth ``piece`` of faces (:func:`_cylinder_regions`;
+    ``strip`` and ``pairs`` as there), and the connected parts of it left over; ([piece], []) when it lies on one
+    cylinder as a whole (a Gmsh-meshed fillet's triangles cross its lines and tilt: its bends agree on no axis,
+    and pieces of it would)."""
     vertices = mesh.vertices[np.unique(mesh.faces[piece])]
     if fit_cylinder(mesh.triangles_center[piece], mesh.face_normals[piece], vertices) is not None:
-        return [], [piece]
+        return [piece], []
     inside = np.zeros(len(mesh.faces), bool)
     inside[piece] = True
     cylinders = _cylinder_regions(mesh, inside, strip, pairs)

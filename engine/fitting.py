@@ -143,9 +143,7 @@ def fit_torus(face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.n
         circle = fit_circle_projected(tube, axis, tolerance=np.inf)
         if circle is None or circle[1] < TORUS_RANGE[0] * size:  # tube centres in one point: a sphere
             return np.inf, None, None, None
-        rel = tube - circle[0]
-        along = rel @ axis
-        off = np.hypot(np.linalg.norm(rel - np.outer(along, axis), axis=1) - circle[1], along)
+        off = np.linalg.norm(_tube_section(tube, circle[0], axis, circle[1]), axis=1)
         return float(np.sqrt(np.mean(off**2)) / abs(signed)), circle[0], axis, circle[1]
 
     # the tube radius, about: the largest curvature between each facet and its nearest sampled neighbours
@@ -174,9 +172,7 @@ def fit_torus(face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.n
 
     def distances(x, at=points):
         c, a, big, small = unpack(x)
-        rel = at - c
-        along = rel @ a
-        return np.hypot(np.linalg.norm(rel - np.outer(along, a), axis=1) - big, along) - small
+        return np.linalg.norm(_tube_section(at, c, a, big), axis=1) - small
 
     found = least_squares(distances, [0, 0, 0, 0, 0, major, abs(best)], x_scale="jac", max_nfev=TORUS_STEPS)
     torus_centre, torus_axis, major, minor = unpack(found.x)
@@ -190,24 +186,26 @@ def fit_torus(face_centres: np.ndarray, face_normals: np.ndarray, vertices: np.n
     return Torus(torus_centre, torus_axis, float(major), float(minor), concave=bool(best < 0))
 
 
+def _tube_section(points: np.ndarray, centre: np.ndarray, axis: np.ndarray, major: float) -> np.ndarray:
+    """(k, 2) where ``points`` (k, 3) lie in the tube's cross-section of a torus of circle ``major`` round unit
+    ``axis`` through ``centre``: out from the circle (away from the axis) and along the axis."""
+    rel = points - centre
+    along = rel @ axis
+    return np.column_stack([np.linalg.norm(rel - np.outer(along, axis), axis=1) - major, along])
+
+
 def _tube_circles(vertices: np.ndarray, centre: np.ndarray, axis: np.ndarray, major: float) -> int:
     """On how many circles round ``axis`` ``vertices`` (k, 3) lie, told apart by their angle round the tube of a
     torus of circle ``major`` about ``centre`` (at least TUBE_STEP apart)."""
-    rel = vertices - centre
-    along = rel @ axis
-    section = np.arctan2(along, np.linalg.norm(rel - np.outer(along, axis), axis=1) - major)
-    return len(np.unique(np.round(section / TUBE_STEP)))
+    out, along = _tube_section(vertices, centre, axis, major).T
+    return len(np.unique(np.round(np.arctan2(along, out) / TUBE_STEP)))
 
 
 def tube_sweep(torus, points: np.ndarray) -> float:
     """The angle (degrees) round the tube of ``torus`` (``centre``, ``axis``, ``major``) that ``points`` (k, 3)
     on it cover."""
-    rel = points - torus.centre
-    along = rel @ torus.axis
-    radial = rel - np.outer(along, torus.axis)
-    distance = np.linalg.norm(radial, axis=1)
-    section = np.column_stack([distance - torus.major, along, np.zeros(len(rel))])
-    return sweep(section, np.array([0.0, 0.0, 1.0]))
+    section = _tube_section(points, torus.centre, torus.axis, torus.major)
+    return sweep(np.column_stack([section, np.zeros(len(points))]), np.array([0.0, 0.0, 1.0]))
 
 
 def torus_kind(turn: float) -> str:
