@@ -1220,9 +1220,10 @@ def describe(feature) -> str:
 
 
 def coordinates(point, scale: float) -> str:
-    """A point as ``x, y, z`` (:func:`number` each), coordinates within 1e-9 x ``scale`` of 0 as 0."""
+    """A point as ``x, y, z`` (:func:`number` each), coordinates within 1e-5 x ``scale`` of 0 as 0 (below the four
+    digits shown of a coordinate of size ``scale``: a float32 STL's rounding, not a position)."""
     point = np.asarray(point, dtype=float)
-    return ", ".join(number(x) for x in np.where(np.abs(point) <= 1e-9 * scale, 0.0, point))
+    return ", ".join(number(x) for x in np.where(np.abs(point) <= 1e-5 * scale, 0.0, point))
 
 
 def number(x: float) -> str:
