@@ -12,7 +12,8 @@ labels) or ``face-N`` / ``edge-N`` (N the CAD tag), get feature kinds from their
 is a fillet of its minor radius, or a hole where it turns half round its tube: a bent bore; a narrow cone a
 chamfer or, concave, a countersink; cylinders keep the shipped tests with the CAD's axis and radius), and
 each an exact surface or curve (analytic for planes, cylinders, cones, spheres and tori, else the CAD entity's
-closest point) onto which :mod:`engine.exact` moves the mesh nodes and 10-node mid-edge nodes.
+closest point) onto which :mod:`engine.exact` moves the mesh nodes and 10-node mid-edge nodes; a face that is
+neither a plane nor a cylinder is triangulated in its own parameters (:class:`FaceChart`), not cut into charts.
 """
 
 from __future__ import annotations
@@ -61,6 +62,10 @@ COARSE_SEEDS = 17  # parameter values per direction of the grid that measures th
 NEWTON_STEPS = 12  # Gauss-Newton steps towards a closest point, ...
 NEWTON_TOLERANCE = 1e-11  # ... until a step moves the point less than this x the model size
 PARAMETRIZED = 256  # CAD faces and edges whose seed grids are kept (each up to MAX_SEEDS points)
+CHART_STRETCH = 1.5  # a CAD face's own parameters chart its triangulation where they stretch one direction at most
+CHART_SPREAD = 4.0  # this x the other and their scale varies at most this x over the face (else: its facets, LSCM)
+CHART_KNOTS = 257  # per parameter, the table that makes a surface of revolution's parameters conformal
+SEPARABLE = 1e-3  # ... a parametrisation whose lines cross at right angles and whose speeds vary along one parameter
 MASS_TRUST = 1e-3  # x the volume: OpenCASCADE's volume of the solids is trusted within this (plus twice the chords'
 # share) of the tessellation's
 CHORD_SAMPLES = 20_000  # the longest facets whose distance from the CAD faces measures the tessellation's
@@ -171,6 +176,25 @@ class Parametrized:
 
     def closest(self, model, points: np.ndarray) -> np.ndarray:
         """(k, 3) the closest points to ``points`` (k, 3) on the entity."""
+        parameters, converged = self._newton(model, points)
+        out = np.reshape(model.getValue(self.dim, self.tag, parameters.ravel()), (-1, 3))
+        if not converged.all():
+            rest = np.flatnonzero(~converged)
+            out[rest] = np.reshape(model.getClosestPoint(self.dim, self.tag, points[rest].ravel())[0], (-1, 3))
+        return out
+
+    def parameters(self, model, points: np.ndarray) -> np.ndarray:
+        """(k, 2) the parameters of the closest points to ``points`` (k, 3) on the face (a face's only: Gmsh's
+        getClosestPoint, where Gauss-Newton does not converge, gives no parameters on a curve)."""
+        parameters, converged = self._newton(model, points)
+        if not converged.all():
+            rest = np.flatnonzero(~converged)
+            parameters[rest] = np.reshape(model.getClosestPoint(2, self.tag, points[rest].ravel())[1], (-1, 2))
+        return parameters
+
+    def _newton(self, model, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(parameters (k, dim), converged (k,) bool): Gauss-Newton from the nearest seeds towards the closest
+        points to ``points`` (k, 3)."""
         dim, tag = self.dim, self.tag
         parameters = self.seeds[self.tree.query(points)[1]].copy()
         period = self.period
@@ -203,11 +227,139 @@ class Parametrized:
             moved = np.linalg.norm(np.einsum("ki,kid->kd", taken, jacobian), axis=1)
             parameters[active] = new
             converged[active[moved <= self.tolerance]] = True
-        out = np.reshape(model.getValue(dim, tag, parameters.ravel()), (-1, 3))
-        if not converged.all():
-            rest = np.flatnonzero(~converged)
-            out[rest] = np.reshape(model.getClosestPoint(dim, tag, points[rest].ravel())[0], (-1, 3))
-        return out
+        return parameters, converged
+
+
+@dataclass(frozen=True)
+class FaceChart:
+    """A CAD face's own parameters (u, v) as the chart its surface triangulation is made in
+    (engine/meshing/surface.py): ``uv(points)`` (k, 2) for points on or near the face, ``lift(uv)`` (k, 3) the
+    face's points, ``scale(uv)`` (k,) lengths on the face per length in the chart. Each chart coordinate is a
+    table of its parameter: the arc length along the parameter's line through the face's median point (a
+    spline's uneven knots evened out), or, where the parametrisation is a surface of revolution's (its lines
+    at right angles, both speeds functions of one parameter: cones, tori, spheres, revolved splines), the
+    conformal (Mercator) coordinate along that parameter, so that a Delaunay triangulation in the chart is one
+    on the face. A periodic parameter is the chart's first coordinate and ``turn`` its period there (a face
+    that may go round: a cone's, a periodic loft's), else ``turn`` is None. Built by :meth:`of`, which refuses
+    (None) a face periodic both ways (a torus) or whose chart would stretch one direction more than
+    CHART_STRETCH x the other or vary its scale more than CHART_SPREAD x over the face (a pole, an apex, a
+    skewed spline)."""
+
+    model: CadModel
+    tag: int
+    order: tuple  # (i, j): the chart's first coordinate comes from the face's parameter i, its second from j
+    tables: tuple  # per chart coordinate, (parameter values, chart values): increasing, interpolated linearly
+    sign: float  # -1.0: the first coordinate mirrored, so that the chart is oriented as seen from outside
+    turn: float | None
+
+    @classmethod
+    def of(cls, model: CadModel, tag: int, vertices: np.ndarray, centres: np.ndarray, normals: np.ndarray):
+        """The chart of CAD face ``tag`` whose tessellation has ``vertices`` (n, 3) and triangles with ``centres``
+        and outward unit ``normals`` (t, 3), or None where the face's parameters do not make a fair chart."""
+        with model.current() as gm:
+            face = _parametrized(model.name, gm, 2, tag)
+            if face.periodic.all():
+                return None
+            order = (1, 0) if face.periodic[1] else (0, 1)
+            at = face.parameters(gm, vertices)[:, order]
+            low, high = face.low[list(order)], face.high[list(order)]
+            lines = []
+            for k in range(2):  # the speeds along each parameter's line through the face's median point
+                line = np.tile(np.median(at, axis=0), (CHART_KNOTS, 1))
+                line[:, k] = np.linspace(low[k], high[k], CHART_KNOTS)
+                lines.append((line[:, k], np.linalg.norm(_derivative(gm, tag, order, line), axis=2)))
+            derivative = _derivative(gm, tag, order, at)
+            centre_derivative = _derivative(gm, tag, order, face.parameters(gm, centres)[:, order])
+        if not np.isfinite(derivative).all() or any((speeds <= 0).any() for _, speeds in lines):
+            return None
+        tables = _chart_tables(at, derivative, lines, low, high)
+        sigma = _singular_values(derivative / _slopes(tables, at)[:, :, None])
+        if (sigma[:, 0] <= 0).any() or (sigma[:, 1] / sigma[:, 0]).max() > CHART_STRETCH:
+            return None
+        if sigma.max() / sigma.min() > CHART_SPREAD:
+            return None
+        facing = np.einsum("kd,kd->k", np.cross(centre_derivative[:, 0], centre_derivative[:, 1]), normals)
+        sign = 1.0 if (facing > 0).sum() >= (facing < 0).sum() else -1.0
+        if (sign * facing > 0).mean() < 0.99:
+            return None
+        turn = float(tables[0][1][-1] - tables[0][1][0]) if face.periodic[order[0]] else None
+        return cls(model, tag, order, tables, sign, turn)
+
+    def uv(self, points: np.ndarray) -> np.ndarray:
+        """(k, 2) chart coordinates of the closest points of the face to ``points`` (k, 3)."""
+        with self.model.current() as gm:
+            at = _parametrized(self.model.name, gm, 2, self.tag).parameters(gm, np.asarray(points, float))
+        at = at[:, list(self.order)]
+        return np.column_stack([self.sign * np.interp(at[:, 0], *self.tables[0]), np.interp(at[:, 1], *self.tables[1])])
+
+    def lift(self, uv: np.ndarray) -> np.ndarray:
+        """(k, 3) the face's points at chart coordinates ``uv`` (k, 2) (a periodic coordinate taken into its
+        period, the other clamped to the face's parameter range)."""
+        at = self._parameters(uv)
+        with self.model.current() as gm:
+            return np.reshape(gm.getValue(2, self.tag, at[:, np.argsort(self.order)].ravel()), (-1, 3))
+
+    def scale(self, uv: np.ndarray) -> np.ndarray:
+        """(k,) lengths on the face per length in the chart at ``uv`` (k, 2): the geometric mean of the two
+        directions' (they differ by CHART_STRETCH at most)."""
+        at = self._parameters(uv)
+        with self.model.current() as gm:
+            sigma = _singular_values(_derivative(gm, self.tag, self.order, at) / _slopes(self.tables, at)[:, :, None])
+        return np.sqrt(sigma.prod(axis=1))
+
+    def _parameters(self, uv: np.ndarray) -> np.ndarray:
+        """(k, 2) the face's parameters, in chart order, at chart coordinates ``uv`` (k, 2)."""
+        (knots0, values0), (knots1, values1) = self.tables
+        first = self.sign * np.asarray(uv, float)[:, 0]
+        if self.turn is not None:
+            first = values0[0] + np.mod(first - values0[0], self.turn)
+        return np.column_stack([np.interp(first, values0, knots0), np.interp(uv[:, 1], values1, knots1)])
+
+
+def _derivative(gm, tag: int, order: tuple, at: np.ndarray) -> np.ndarray:
+    """(k, 2, 3) CAD face ``tag``'s derivatives along its parameters at ``at`` (k, 2), both in chart ``order``."""
+    face_order = np.ascontiguousarray(at[:, np.argsort(order)])
+    return np.reshape(gm.getDerivative(2, tag, face_order.ravel()), (-1, 2, 3))[:, list(order)]
+
+
+def _chart_tables(at, derivative, lines, low, high) -> tuple:
+    """The tables of :class:`FaceChart`, per chart coordinate (parameter values, chart values), for the face
+    whose parameters ``at`` (n, 2) have derivatives ``derivative`` (n, 2, 3); ``lines``: per parameter (values
+    (m,), speeds (m, 2)) along its line through the face. Conformal along parameter k where both speeds are
+    functions of parameter k alone within SEPARABLE (and the lines cross at right angles); else each
+    coordinate is the arc length along its own line."""
+    speed = np.linalg.norm(derivative, axis=2)
+    crossing = np.abs(np.einsum("kd,kd->k", derivative[:, 0], derivative[:, 1])) / speed.prod(axis=1)
+    tables = [(values, _integral(values, along[:, k])) for k, (values, along) in enumerate(lines)]
+    for k, (values, along) in enumerate(lines):
+        predicted = np.column_stack([np.interp(at[:, k], values, along[:, j]) for j in range(2)])
+        if crossing.max() <= SEPARABLE and (np.abs(predicted - speed) <= SEPARABLE * speed).all():
+            other = 1 - k
+            reference = float(np.median(speed[:, other]))
+            tables[k] = (values, reference * _integral(values, along[:, k] / along[:, other]))
+            tables[other] = (np.array([low[other], high[other]]), reference * np.array([low[other], high[other]]))
+            break
+    return tuple(tables)
+
+
+def _integral(values: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """The running integral (trapezoids) of ``rate`` over ``values`` (m,), from 0."""
+    return np.concatenate([[0.0], np.cumsum(np.diff(values) * (rate[1:] + rate[:-1]) / 2)])
+
+
+def _slopes(tables: tuple, at: np.ndarray) -> np.ndarray:
+    """(k, 2) each chart coordinate's rate of change with its parameter at ``at`` (k, 2)."""
+    slopes = []
+    for k, (values, mapped) in enumerate(tables):
+        rate = np.diff(mapped) / np.diff(values)
+        slopes.append(rate[np.clip(np.searchsorted(values, at[:, k]) - 1, 0, len(rate) - 1)])
+    return np.column_stack(slopes)
+
+
+def _singular_values(jacobian: np.ndarray) -> np.ndarray:
+    """(k, 2) ascending singular values of ``jacobian`` (k, 2, 3)."""
+    gram = np.einsum("kid,kjd->kij", jacobian, jacobian)
+    return np.sqrt(np.clip(np.linalg.eigvalsh(gram), 0.0, None))
 
 
 @dataclass(frozen=True)
@@ -408,6 +560,22 @@ class _CadFaces:
     edge_names: list = dataclasses.field(default_factory=list)
     edge_faces: list = dataclasses.field(default_factory=list)
 
+    def _chart(self, geometry: Geometry, face: np.ndarray, triangles: np.ndarray) -> FaceChart | None:
+        """The :class:`FaceChart` of the ``triangles`` (mask over ``geometry``'s) when they are one CAD face (of
+        ``face``, per triangle) that is neither a plane nor a cylinder (those have exact charts of their own),
+        else None."""
+        members = np.unique(face[triangles])
+        if len(members) != 1 or self.surfaces[members[0]].form in ("Plane", "Cylinder"):
+            return None
+        mesh = geometry.mesh
+        return FaceChart.of(
+            self.model,
+            int(self.faces[members[0]]),
+            mesh.vertices[np.unique(mesh.faces[triangles])],
+            mesh.triangles_center[triangles],
+            mesh.face_normals[triangles],
+        )
+
     @staticmethod
     def kept(vertices, triangles, face, keep) -> np.ndarray:
         """The face index of each triangle on a ``keep`` face."""
@@ -433,14 +601,19 @@ class _CadFaces:
         group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids)
         group = np.unique(group[face], return_inverse=True)[1] + 1  # per triangle, numbered among the kept faces
         first = np.unique(group, return_index=True)[1]  # a triangle of each group
+        charts = [self._chart(geometry, face, group == g) for g in range(1, group.max() + 1)]
         features = detect_features(  # a cylinder's faces, whose facets may fit none (B-spline, short), stay whole
             geometry,
             self.feature_angle,
             [lambda _, g=g: group == g for g in range(1, group.max() + 1)],
-            [self.surfaces[k].form == "Cylinder" for k in face[first]],
+            [self.surfaces[k].form == "Cylinder" or c is not None for k, c in zip(face[first], charts)],
             tori=False,
         )
         patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
+        patch_charts = tuple(
+            charts[group[p.faces[0]] - 1] if len(p.faces) == (group == group[p.faces[0]]).sum() else None
+            for p in features.patches
+        )
         patches = [
             _face_kinds(
                 dataclasses.replace(
@@ -466,7 +639,9 @@ class _CadFaces:
             else CadEntity(model, 2, tuple(faces[np.unique(face[_beside(geometry, curve)])].tolist()))
             for curve, m in zip(features.curves, curve_edges)
         ]
-        features = dataclasses.replace(features, patches=patches, curves=curves, exact=(exact_patches, exact_curves))
+        features = dataclasses.replace(
+            features, patches=patches, curves=curves, exact=(exact_patches, exact_curves), charts=patch_charts
+        )
         return (
             geometry,
             features,

@@ -136,6 +136,8 @@ class Features:
     # with .project(points); None: fitted from the facets (engine/exact.py)
     assembly: object | None = None  # touching solids of a CAD file (engine/cad.py ``Assembly``): meshed body by
     # body with conforming interfaces (engine/assembly.py); None for one solid or solids apart
+    charts: tuple = ()  # per patch, the chart its surface triangulation is made in when the input gives one (a
+    # CAD face's own parameters: engine/cad.py ``FaceChart``), else None; empty: none given
 
     def named(self, name: str) -> list:
         """All features carrying ``name``."""
@@ -212,7 +214,7 @@ def first_segment(curve, end: int) -> np.ndarray:
 
 
 def detect_features(
-    geometry: Geometry, feature_angle: float = 30.0, face_groups=(), on_cylinder=(), tori: bool = True
+    geometry: Geometry, feature_angle: float = 30.0, face_groups=(), whole=(), tori: bool = True
 ) -> Features:
     """Find corners, feature curves and patches of ``geometry`` (angles in degrees).
 
@@ -225,8 +227,9 @@ def detect_features(
     neither a plane nor a cylinder is cut into charts (see :func:`chart_pieces`):
     its planar faces, its cylinders (a fillet, a hole wall) and pieces of
     bounded normal spread, each of which can be flattened; the cuts are
-    smooth (``sharp=False``) curves. ``on_cylinder``: per face group, whether it is known to lie on a
-    cylinder (a CAD face's surface, where a short or B-spline face's facets fit none): never cut into charts.
+    smooth (``sharp=False``) curves. ``whole``: per face group, whether it is never cut into charts (a CAD
+    face on a cylinder, where a short or B-spline face's facets fit none, or triangulated in its own
+    parameters).
     ``tori``: give a curved patch the torus its facets fit (:func:`fit_torus`; not for a CAD model, whose faces
     know their surfaces).
     """
@@ -251,12 +254,12 @@ def detect_features(
             group[_half(mesh, patches[p].faces)] = k
         sharp |= group[adjacency[:, 0]] != group[adjacency[:, 1]]
         patches, face_patch = _patches(geometry, adjacency[~sharp])
-    cylindrical = np.zeros(group.max() + 1, bool)
-    cylindrical[1 : len(on_cylinder) + 1] = np.asarray(on_cylinder, bool)[: group.max()]
+    uncut = np.zeros(group.max() + 1, bool)
+    uncut[1 : len(whole) + 1] = np.asarray(whole, bool)[: group.max()]
     pieces = [
         piece
         for patch in patches
-        if not patch.planar and patch.cylinder is None and not cylindrical[group[patch.faces[0]]]
+        if not patch.planar and patch.cylinder is None and not uncut[group[patch.faces[0]]]
         for piece in chart_pieces(mesh, patch.faces, face_patch, ~sharp, geometry.source)
     ]
     if pieces:

@@ -463,10 +463,8 @@ def test_chain_edges_a_triangulation_keeps_missing_are_refused_with_their_place(
 
     real = surface._triangulate_patch
 
-    def missing_one(patch, geometry, points, radius, constraints, droppable, constrained=False):
-        tri, crowded, lost, new_points, new_radius = real(
-            patch, geometry, points, radius, constraints, droppable, constrained
-        )
+    def missing_one(chart, points, radius, constraints, droppable, constrained=False):
+        tri, crowded, lost, new_points, new_radius = real(chart, points, radius, constraints, droppable, constrained)
         return tri, crowded, constraints[:1], new_points, new_radius
 
     geometry, features, _, packing = packed("l_bracket")

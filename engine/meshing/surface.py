@@ -125,8 +125,7 @@ def triangulate_boundary(packing, geometry, features) -> BoundaryTriangulation:
             if len(members) < 3:
                 continue
             tri, crowded, lost, new_points, new_radius = _triangulate_patch(
-                patch,
-                geometry,
+                PatchChart(patch, geometry, features.charts[p] if features.charts else None),
                 nodes.points[members],
                 nodes.radius[members],
                 np.searchsorted(members, edges),
@@ -286,16 +285,16 @@ def _split_chain_edges(nodes, features, chains, pairs):
     return Packing.concatenate([nodes, added], nodes.stats)
 
 
-def _triangulate_patch(patch, geometry, points, radius, constraints, droppable, constrained=False):
-    """One patch's surface triangulation, refined where the packing left a hole.
+def _triangulate_patch(chart, points, radius, constraints, droppable, constrained=False):
+    """One patch's surface triangulation in its ``chart``, refined where the packing left a hole.
 
     Returns (triangles over the nodes then the added points, counter-clockwise
     seen from outside; ``droppable`` nodes left out for crowding the border;
     constrained edges the triangulation misses; added points (k, 3) and their radii). ``constrained``: a
     Delaunay triangulation that misses constrained edges is replaced by a constrained one.
     """
-    chart = PatchChart(patch, geometry)
     uv = chart.uv(points)
+    radius = radius / chart.scale(uv)  # sizes in the chart's lengths
     added_uv, added_radius = np.zeros((0, 2)), np.zeros(0)
     for round in range(REFINE_ROUNDS + 1):
         all_uv, all_radius = np.vstack([uv, added_uv]), np.concatenate([radius, added_radius])
@@ -310,7 +309,8 @@ def _triangulate_patch(patch, geometry, points, radius, constraints, droppable, 
     kept_added = np.setdiff1d(np.arange(len(added_uv)), crowded - len(uv))
     renumber = np.arange(len(all_uv))  # crowded added points are forgotten rather than dropped
     renumber[len(uv) + kept_added] = len(uv) + np.arange(len(kept_added))
-    return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv[kept_added]), added_radius[kept_added])
+    added_uv, added_radius = added_uv[kept_added], added_radius[kept_added]
+    return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv), added_radius * chart.scale(added_uv))
 
 
 def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained):
@@ -476,10 +476,12 @@ def _crowding(uv, edges, candidate, h) -> np.ndarray:
 
 class PatchChart:
     """A patch flattened: ``uv(points)`` orientation-preserving seen from outside, ``lift(uv)`` back onto
-    the patch's input triangles. A plane is projected, a cylinder unrolled, any other patch mapped by a
-    least-squares conformal map of its input triangles. A full cylinder's strip is periodic (``turn``)."""
+    the patch's input triangles. A plane is projected, a cylinder unrolled, a CAD face with a ``given`` chart
+    (its own parameters, engine/cad.py ``FaceChart``) mapped by it (and lifted onto the face itself), any other
+    patch mapped by a least-squares conformal map of its input triangles. A full cylinder's strip, or a given
+    chart's periodic one, is periodic (``turn``)."""
 
-    def __init__(self, patch, geometry):
+    def __init__(self, patch, geometry, given=None):
         mesh = geometry.mesh
         used, local = np.unique(mesh.faces[patch.faces], return_inverse=True)
         self.vertices = np.ascontiguousarray(mesh.vertices[used], dtype=np.float64)
@@ -507,6 +509,8 @@ class PatchChart:
             across = np.angle(np.exp(1j * (angle[self.faces] - self.middle - np.pi)))
             if (np.ptp(across, axis=1) > np.pi).any():  # ... unless a triangle crosses it: the patch goes round
                 self.turn, self.middle = 2 * np.pi * c.radius, -np.pi  # (a keyed bore's 330 degrees does not)
+        elif given is not None:
+            self.kind, self.given, self.turn = "parametric", given, given.turn
         else:
             self.kind = "conformal"
             self.vertex_uv = self._conformal_map(patch, geometry.source)
@@ -526,6 +530,8 @@ class PatchChart:
             c = self.cylinder
             theta = np.angle(np.exp(1j * (self._angle(points) - self.middle - np.pi)))
             return np.column_stack([self.sign * c.radius * theta, (points - c.point) @ c.axis])
+        if self.kind == "parametric":
+            return self.given.uv(points)
         # the nearest triangle's map, extended over its plane: a smoothed cut's node just off the patch (the cut
         # crosses facets) is mapped beyond the border rather than onto its nearest border point, where nodes of
         # one chain (or of two cuts meeting at a small angle) would share uv
@@ -545,10 +551,18 @@ class PatchChart:
             )
         return np.einsum("ij,ijk->ik", weights, self.vertex_uv[self.faces[face]])
 
+    def scale(self, uv: np.ndarray) -> np.ndarray:
+        """(k,) lengths on the patch per length in the chart at ``uv`` (k, 2): a given chart's own, else 1 (a
+        plane's and a cylinder's are isometric, a conformal map's is fitted to the patch's lengths)."""
+        return self.given.scale(uv) if self.kind == "parametric" else np.ones(len(uv))
+
     def lift(self, uv: np.ndarray) -> np.ndarray:
-        """Points on the patch's input triangles at ``uv`` (NaN rows where ``uv`` is off a conformal chart)."""
+        """Points on the patch's input triangles (a given chart's: on its CAD face) at ``uv`` (NaN rows where ``uv`` is
+        off a conformal chart)."""
         if self.kind == "plane":
             x = self.origin + uv @ self.frame.T
+        elif self.kind == "parametric":
+            return self.given.lift(uv)
         elif self.kind == "cylinder":
             c = self.cylinder
             theta = uv[:, 0] / (self.sign * c.radius) + self.middle + np.pi
