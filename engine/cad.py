@@ -63,9 +63,12 @@ NEWTON_STEPS = 12  # Gauss-Newton steps towards a closest point, ...
 NEWTON_TOLERANCE = 1e-11  # ... until a step moves the point less than this x the model size
 PARAMETRIZED = 256  # CAD faces and edges whose seed grids are kept (each up to MAX_SEEDS points)
 CHART_STRETCH = 1.5  # a CAD face's own parameters chart its triangulation where they stretch one direction at most
-CHART_SPREAD = 4.0  # this x the other and their scale varies at most this x over the face (else: its facets, LSCM)
+CHART_SPREAD = 4.0  # this x the other and their scale varies at most this x over the face (else: its facets, LSCM),
+CONFORMAL_SPREAD = 16.0  # ... or this x where the chart is conformal (sizes enter it divided by its scale)
 CHART_KNOTS = 257  # per parameter, the table that makes a surface of revolution's parameters conformal
 SEPARABLE = 1e-3  # ... a parametrisation whose lines cross at right angles and whose speeds vary along one parameter
+POLE = 1e-6  # x its largest: a parameter's speed this small at one end of the other's range is a pole (a dome's top)
+SMOOTH_POLE = 0.02  # a pole is smooth (polar chart) where the circles round it are 2 pi times their radius within this
 MASS_TRUST = 1e-3  # x the volume: OpenCASCADE's volume of the solids is trusted within this (plus twice the chords'
 # share) of the tessellation's
 CHORD_SAMPLES = 20_000  # the longest facets whose distance from the CAD faces measures the tessellation's
@@ -240,17 +243,22 @@ class FaceChart:
     at right angles, both speeds functions of one parameter: cones, tori, spheres, revolved splines), the
     conformal (Mercator) coordinate along that parameter, so that a Delaunay triangulation in the chart is one
     on the face. A periodic parameter is the chart's first coordinate and ``turn`` its period there (a face
-    that may go round: a cone's, a periodic loft's), else ``turn`` is None. Built by :meth:`of`, which refuses
-    (None) a face periodic both ways (a torus) or whose chart would stretch one direction more than
-    CHART_STRETCH x the other or vary its scale more than CHART_SPREAD x over the face (a pole, an apex, a
-    skewed spline)."""
+    that may go round: a cone's, a periodic loft's), else ``turn`` is None. A surface of revolution's face that
+    reaches its axis at one end (a pole: a dome, a ball, a knob's top, a rounded corner's sphere) is charted
+    polar (``polar``: the chart's angle per unit of the first parameter), the conformal coordinate as the log
+    of the radius (the stereographic map of a sphere), so the pole is one point of the chart. Built by
+    :meth:`of`, which refuses (None) a face periodic both ways (a torus), with poles at both ends (a whole
+    sphere) or whose chart would stretch one direction more than CHART_STRETCH x the other or vary its scale
+    more than CHART_SPREAD x over the face (CONFORMAL_SPREAD x for a conformal chart: a cone's apex, a skewed
+    spline)."""
 
     model: CadModel
     tag: int
     order: tuple  # (i, j): the chart's first coordinate comes from the face's parameter i, its second from j
-    tables: tuple  # per chart coordinate, (parameter values, chart values): increasing, interpolated linearly
-    sign: float  # -1.0: the first coordinate mirrored, so that the chart is oriented as seen from outside
+    tables: tuple  # per chart coordinate, (parameter values, chart values): monotone, interpolated linearly
+    sign: float  # -1.0: the chart mirrored, so that it is oriented as seen from outside
     turn: float | None
+    polar: float | None = None
 
     @classmethod
     def of(cls, model: CadModel, tag: int, vertices: np.ndarray, centres: np.ndarray, normals: np.ndarray):
@@ -260,37 +268,50 @@ class FaceChart:
             face = _parametrized(model.name, gm, 2, tag)
             if face.periodic.all():
                 return None
-            order = (1, 0) if face.periodic[1] else (0, 1)
-            at = face.parameters(gm, vertices)[:, order]
-            low, high = face.low[list(order)], face.high[list(order)]
-            lines = []
-            for k in range(2):  # the speeds along each parameter's line through the face's median point
-                line = np.tile(np.median(at, axis=0), (CHART_KNOTS, 1))
-                line[:, k] = np.linspace(low[k], high[k], CHART_KNOTS)
-                lines.append((line[:, k], np.linalg.norm(_derivative(gm, tag, order, line), axis=2)))
-            derivative = _derivative(gm, tag, order, at)
-            centre_derivative = _derivative(gm, tag, order, face.parameters(gm, centres)[:, order])
-        if not np.isfinite(derivative).all() or any((speeds <= 0).any() for _, speeds in lines):
+            vertex_at, centre_at = face.parameters(gm, vertices), face.parameters(gm, centres)
+            for order in ((1, 0), (0, 1)) if face.periodic[1] else ((0, 1), (1, 0)):
+                at = vertex_at[:, order]
+                low, high = face.low[list(order)], face.high[list(order)]
+                lines = []
+                for k in range(2):  # the speeds along each parameter's line through the face's median point
+                    line = np.tile(np.median(at, axis=0), (CHART_KNOTS, 1))
+                    line[:, k] = np.linspace(low[k], high[k], CHART_KNOTS)
+                    lines.append((line[:, k], np.linalg.norm(_derivative(gm, tag, order, line), axis=2)))
+                derivative = _derivative(gm, tag, order, at)
+                if not np.isfinite(derivative).all():
+                    return None
+                layout = _chart_tables(at, derivative, lines, low, high, bool(face.periodic[order[0]]))
+                if layout is None or layout[1] is None or layout[2] == 1:
+                    break  # a polar chart's angle is its first coordinate: else the other order
+            centre_derivative = _derivative(gm, tag, order, centre_at[:, order])
+        if layout is None or (layout[1] is not None and layout[2] != 1):
             return None
-        tables = _chart_tables(at, derivative, lines, low, high)
-        sigma = _singular_values(derivative / _slopes(tables, at)[:, :, None])
+        tables, polar, _ = layout
+        slopes = _slopes(tables, polar, at)
+        away = (slopes > POLE * slopes.max(axis=0)).all(axis=1)  # not at the pole itself
+        sigma = _singular_values(derivative[away] / slopes[away][:, :, None])
         if (sigma[:, 0] <= 0).any() or (sigma[:, 1] / sigma[:, 0]).max() > CHART_STRETCH:
             return None
-        if sigma.max() / sigma.min() > CHART_SPREAD:
+        if sigma.max() / sigma.min() > (CHART_SPREAD if layout[2] is None else CONFORMAL_SPREAD):
             return None
         facing = np.einsum("kd,kd->k", np.cross(centre_derivative[:, 0], centre_derivative[:, 1]), normals)
         sign = 1.0 if (facing > 0).sum() >= (facing < 0).sum() else -1.0
         if (sign * facing > 0).mean() < 0.99:
             return None
-        turn = float(tables[0][1][-1] - tables[0][1][0]) if face.periodic[order[0]] else None
-        return cls(model, tag, order, tables, sign, turn)
+        if polar is not None:  # the angle and the radius turn the other way round than (u, v) where the radius
+            sign *= 1.0 if tables[1][1][0] > tables[1][1][-1] else -1.0  # grows with v
+        turn = float(tables[0][1][-1] - tables[0][1][0]) if face.periodic[order[0]] and polar is None else None
+        return cls(model, tag, order, tables, sign, turn, polar)
 
     def uv(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) chart coordinates of the closest points of the face to ``points`` (k, 3)."""
         with self.model.current() as gm:
             at = _parametrized(self.model.name, gm, 2, self.tag).parameters(gm, np.asarray(points, float))
         at = at[:, list(self.order)]
-        return np.column_stack([self.sign * np.interp(at[:, 0], *self.tables[0]), np.interp(at[:, 1], *self.tables[1])])
+        first, second = (np.interp(at[:, k], *self.tables[k]) for k in range(2))
+        if self.polar is not None:
+            return second[:, None] * np.column_stack([np.cos(self.sign * first), np.sin(self.sign * first)])
+        return np.column_stack([self.sign * first, second])
 
     def lift(self, uv: np.ndarray) -> np.ndarray:
         """(k, 3) the face's points at chart coordinates ``uv`` (k, 2) (a periodic coordinate taken into its
@@ -301,19 +322,34 @@ class FaceChart:
 
     def scale(self, uv: np.ndarray) -> np.ndarray:
         """(k,) lengths on the face per length in the chart at ``uv`` (k, 2): the geometric mean of the two
-        directions' (they differ by CHART_STRETCH at most)."""
+        directions' (they differ by CHART_STRETCH at most; a polar chart's by its radial direction, which
+        holds at the pole too)."""
         at = self._parameters(uv)
         with self.model.current() as gm:
-            sigma = _singular_values(_derivative(gm, self.tag, self.order, at) / _slopes(self.tables, at)[:, :, None])
-        return np.sqrt(sigma.prod(axis=1))
+            derivative = _derivative(gm, self.tag, self.order, at)
+        slopes = _slopes(self.tables, self.polar, at)
+        if self.polar is not None:
+            return np.linalg.norm(derivative[:, 1], axis=1) / np.maximum(slopes[:, 1], 1e-300)
+        return np.sqrt(_singular_values(derivative / slopes[:, :, None]).prod(axis=1))
 
     def _parameters(self, uv: np.ndarray) -> np.ndarray:
         """(k, 2) the face's parameters, in chart order, at chart coordinates ``uv`` (k, 2)."""
+        uv = np.asarray(uv, float)
         (knots0, values0), (knots1, values1) = self.tables
-        first = self.sign * np.asarray(uv, float)[:, 0]
-        if self.turn is not None:
-            first = values0[0] + np.mod(first - values0[0], self.turn)
-        return np.column_stack([np.interp(first, values0, knots0), np.interp(uv[:, 1], values1, knots1)])
+        if self.polar is not None:
+            middle = (values0[0] + values0[-1]) / 2  # the angle taken round the face's middle one
+            first = middle + np.angle(np.exp(1j * (self.sign * np.arctan2(uv[:, 1], uv[:, 0]) - middle)))
+            second = np.hypot(uv[:, 0], uv[:, 1])
+        else:
+            first, second = self.sign * uv[:, 0], uv[:, 1]
+            if self.turn is not None:
+                first = values0[0] + np.mod(first - values0[0], self.turn)
+        return np.column_stack([_inverse(first, knots0, values0), _inverse(second, knots1, values1)])
+
+
+def _inverse(values: np.ndarray, knots: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """The parameters at which the monotone ``table`` (over ``knots``) takes ``values``."""
+    return np.interp(values, table, knots) if table[-1] >= table[0] else np.interp(values, table[::-1], knots[::-1])
 
 
 def _derivative(gm, tag: int, order: tuple, at: np.ndarray) -> np.ndarray:
@@ -322,24 +358,57 @@ def _derivative(gm, tag: int, order: tuple, at: np.ndarray) -> np.ndarray:
     return np.reshape(gm.getDerivative(2, tag, face_order.ravel()), (-1, 2, 3))[:, list(order)]
 
 
-def _chart_tables(at, derivative, lines, low, high) -> tuple:
-    """The tables of :class:`FaceChart`, per chart coordinate (parameter values, chart values), for the face
-    whose parameters ``at`` (n, 2) have derivatives ``derivative`` (n, 2, 3); ``lines``: per parameter (values
-    (m,), speeds (m, 2)) along its line through the face. Conformal along parameter k where both speeds are
-    functions of parameter k alone within SEPARABLE (and the lines cross at right angles); else each
-    coordinate is the arc length along its own line."""
+def _chart_tables(at, derivative, lines, low, high, periodic: bool):
+    """(tables, polar, k) of :class:`FaceChart` for the face whose parameters ``at`` (n, 2) have derivatives
+    ``derivative`` (n, 2, 3); ``lines``: per parameter (values (m,), speeds (m, 2)) along its line through the
+    face; ``periodic``: the first parameter is. Where both speeds are functions of parameter k alone within
+    SEPARABLE (and the lines cross at right angles): conformal along k, polar where the other parameter's speed
+    vanishes at one end of k's range (a pole; ``polar`` the angle per unit of the other parameter); else each
+    coordinate the arc length along its own line (k None). None: a pole at both ends, or a speed that vanishes
+    on a face that is no surface of revolution."""
     speed = np.linalg.norm(derivative, axis=2)
-    crossing = np.abs(np.einsum("kd,kd->k", derivative[:, 0], derivative[:, 1])) / speed.prod(axis=1)
-    tables = [(values, _integral(values, along[:, k])) for k, (values, along) in enumerate(lines)]
+    crossing = np.abs(np.einsum("kd,kd->k", derivative[:, 0], derivative[:, 1])) / np.maximum(
+        speed.prod(axis=1), 1e-300
+    )
     for k, (values, along) in enumerate(lines):
-        predicted = np.column_stack([np.interp(at[:, k], values, along[:, j]) for j in range(2)])
-        if crossing.max() <= SEPARABLE and (np.abs(predicted - speed) <= SEPARABLE * speed).all():
-            other = 1 - k
-            reference = float(np.median(speed[:, other]))
-            tables[k] = (values, reference * _integral(values, along[:, k] / along[:, other]))
-            tables[other] = (np.array([low[other], high[other]]), reference * np.array([low[other], high[other]]))
-            break
-    return tuple(tables)
+        other = 1 - k
+        pole = along[[0, -1], other] <= POLE * along[:, other].max()
+        inner = slice(1 if pole[0] else 0, len(values) - 1 if pole[1] else len(values))
+        away = speed[:, other] > POLE * along[:, other].max()
+        predicted = np.column_stack([np.interp(at[away, k], values[inner], along[inner, j]) for j in range(2)])
+        if (
+            crossing[away].max(initial=0) > SEPARABLE
+            or (np.abs(predicted - speed[away]) > SEPARABLE * speed[away]).any()
+        ):
+            continue
+        if pole.all() or (along[inner] <= 0).any():
+            return None
+        ratio = along[inner, k] / along[inner, other]
+        tables = [None, None]
+        if pole.any():
+            span = high[other] - low[other]
+            angle = 2 * np.pi / span if periodic and other == 0 else 1.0  # radians per unit of the other parameter
+            if angle * span > 2 * np.pi * (1 + 1e-9):
+                return None
+            near = 1 if pole[0] else len(values) - 2  # the knot next to the pole: a smooth pole's circles there
+            from_pole = abs(values[near] - values[near - 1 if pole[0] else near + 1]) * along[near, k]  # are 2 pi
+            if abs(along[near, other] / (angle * from_pole) - 1) > SMOOTH_POLE:  # times as long as their distance
+                return None  # from the pole (a cone's apex: sin of its half-angle times)
+            log = angle * _integral(values[inner], ratio) * (1.0 if pole[0] else -1.0)
+            middle = np.median(at[:, k])
+            radius = float(np.interp(middle, values, along[:, other])) / angle  # chart lengths as the face's there
+            rho = radius * np.exp(log - np.interp(middle, values[inner], log))
+            rho = np.concatenate([[0.0], rho]) if pole[0] else np.concatenate([rho, [0.0]])
+            tables[k] = (values, rho)
+            tables[other] = (np.array([low[other], high[other]]), angle * np.array([low[other], high[other]]))
+            return tuple(tables), angle, k
+        reference = float(np.median(speed[:, other]))
+        tables[k] = (values, reference * _integral(values, ratio))
+        tables[other] = (np.array([low[other], high[other]]), reference * np.array([low[other], high[other]]))
+        return tuple(tables), None, k
+    if any((along <= 0).any() for _, along in lines):
+        return None
+    return tuple((values, _integral(values, along[:, k])) for k, (values, along) in enumerate(lines)), None, None
 
 
 def _integral(values: np.ndarray, rate: np.ndarray) -> np.ndarray:
@@ -347,13 +416,17 @@ def _integral(values: np.ndarray, rate: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.diff(values) * (rate[1:] + rate[:-1]) / 2)])
 
 
-def _slopes(tables: tuple, at: np.ndarray) -> np.ndarray:
-    """(k, 2) each chart coordinate's rate of change with its parameter at ``at`` (k, 2)."""
+def _slopes(tables: tuple, polar: float | None, at: np.ndarray) -> np.ndarray:
+    """(k, 2) the chart's lengths per unit of each parameter at ``at`` (k, 2): each table's rate of change (a
+    polar chart's angle times its radius there)."""
     slopes = []
     for k, (values, mapped) in enumerate(tables):
-        rate = np.diff(mapped) / np.diff(values)
+        rate = np.abs(np.diff(mapped) / np.diff(values))
         slopes.append(rate[np.clip(np.searchsorted(values, at[:, k]) - 1, 0, len(rate) - 1)])
-    return np.column_stack(slopes)
+    slopes = np.column_stack(slopes)
+    if polar is not None:
+        slopes[:, 0] *= np.interp(at[:, 1], *tables[1])
+    return slopes
 
 
 def _singular_values(jacobian: np.ndarray) -> np.ndarray:

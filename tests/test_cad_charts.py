@@ -2,7 +2,8 @@
 
 Parts written by Gmsh's OpenCASCADE: a pin whose tip is a full cone (radius 10 to 3: periodic, its scale
 varying 3.3x), a quarter elbow (a torus piece periodic round its tube), a disc with a root fillet (a torus piece
-periodic round its axis), the corpus's block with a B-spline top, and a ring (a whole torus: periodic both ways, not
+periodic round its axis), the corpus's block with a B-spline top, a ball on a neck (a sphere with its pole: polar),
+a blind hole's drill point (a cone's apex: not charted) and a ring (a whole torus: periodic both ways, not
 charted). Checked: each charted face is one patch (not cut into charts), periodic ones with their turn; the
 chart is faithful (lift(uv(x)) = x on the face) and, for the surfaces of revolution, conformal (a short step
 on the face is the chart's step times its scale, the same in every direction); the meshes pass the gate with
@@ -50,11 +51,28 @@ def root_fillet_disc():
     occ.fillet([body[1]], root, [4])
 
 
+def ball_on_neck():
+    ball = occ.addSphere(0, 0, 40, 12)
+    neck = occ.addCylinder(0, 0, 0, 0, 0, 35, 6)
+    occ.fuse([(3, ball)], [(3, neck)])
+
+
+def drill_point():
+    block = occ.addBox(-15, -15, 0, 30, 30, 30)
+    bore = occ.addCylinder(0, 0, 10, 0, 0, 21, 5)
+    tip = occ.addCone(0, 0, 10 - 5 / math.tan(math.radians(59)), 0, 0, 5 / math.tan(math.radians(59)), 0, 5)
+    (tool,), _ = occ.fuse([(3, bore)], [(3, tip)])
+    occ.cut([(3, block)], [tool])
+
+
 def ring():
     occ.addTorus(0, 0, 0, 30, 8)
 
 
-PARTS = {f.__name__: f for f in (cone_tip_pin, elbow, root_fillet_disc, make_parts.freeform_top, ring)}
+PARTS = {
+    f.__name__: f
+    for f in (cone_tip_pin, elbow, root_fillet_disc, make_parts.freeform_top, ball_on_neck, drill_point, ring)
+}
 
 
 @pytest.fixture(scope="module")
@@ -106,13 +124,35 @@ def test_a_face_is_triangulated_in_its_own_parameters(step_files, part, surface,
     assert np.abs(stretch - 1).max() < tolerance
 
 
+def test_a_dome_is_charted_polar_with_its_pole_one_point(step_files):
+    """The ball's sphere reaches its axis at the top: a polar chart (the stereographic map), conformal up to the
+    pole, which is the chart's origin; a drill point's cone reaches its axis at an apex, where no conformal chart
+    keeps its scale: refused (its facets' chart, which puts a node at the tip)."""
+    _, geometry, features = solid_features(step_files["ball_on_neck"])
+    [(patch, chart)] = _charted(features, "Sphere")
+    assert chart.polar is not None and chart.turn is None
+    assert np.linalg.norm(chart.lift(np.zeros((1, 2))) - [0, 0, 52]) < 1e-9 * geometry.scale  # the pole
+    rng = np.random.default_rng(1)
+    on = 12 * (x := rng.normal(size=(200, 3))) / np.linalg.norm(x, axis=1, keepdims=True) + [0, 0, 40]
+    on = on[on[:, 2] > 40]  # the upper half, the pole's side
+    uv = chart.uv(on)
+    assert np.abs(chart.lift(uv) - on).max() < 1e-7 * geometry.scale
+    step = 1e-3 * geometry.scale * np.column_stack([np.cos(a := rng.uniform(0, 2 * np.pi, len(uv))), np.sin(a)])
+    stretch = np.linalg.norm(chart.lift(uv + step / chart.scale(uv)[:, None]) - on, axis=1) / np.linalg.norm(
+        step, axis=1
+    )
+    assert np.abs(stretch - 1).max() < 0.01
+    _, _, drilled = solid_features(step_files["drill_point"])
+    assert [p.surface for p, c in zip(drilled.patches, drilled.charts) if c is not None] == []
+
+
 def test_a_face_periodic_both_ways_keeps_the_charts_of_its_facets(step_files):
     _, _, features = solid_features(step_files["ring"])
     assert all(c is None for c in features.charts)
     assert len(features.patches) > 1  # a whole torus is cut (its facets' conformal charts)
 
 
-@pytest.mark.parametrize("part", ["cone_tip_pin", "elbow", "root_fillet_disc", "freeform_top"])
+@pytest.mark.parametrize("part", ["cone_tip_pin", "elbow", "root_fillet_disc", "freeform_top", "ball_on_neck"])
 def test_charted_faces_mesh_onto_the_cad(step_files, tmp_path, part):
     job = job_from_dict(
         {"geometry": {"file": str(step_files[part])}, "output": {"directory": str(tmp_path), "formats": ["vtu"]}}

@@ -406,7 +406,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
         normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
         deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
-        badness = np.fmax(badness, deviation / (DEVIATION * h))
+        badness = np.fmax(badness, deviation / (DEVIATION * h * chart.scale(point)))  # h on the patch
         badness[np.isnan(lifted[:, 0])] = 0.0  # off a conformal chart's triangles: nowhere to put a node
         if chart.kind == "conformal":  # input vertices the triangles pass far from (a drill point's tip)
             vertex_uv, vertex_badness, vertex_h = _stray_vertices(chart, uv, tri, corners[0], normal, h)
