@@ -62,7 +62,7 @@ COARSE_SEEDS = 17  # parameter values per direction of the grid that measures th
 NEWTON_STEPS = 12  # Gauss-Newton steps towards a closest point, ...
 NEWTON_TOLERANCE = 1e-11  # ... until a step moves the point less than this x the model size
 PARAMETRIZED = 256  # CAD faces and edges whose seed grids are kept (each up to MAX_SEEDS points)
-CHART_STRETCH = 1.5  # a CAD face's own parameters chart its triangulation where they stretch one direction at most
+CHART_STRETCH = 1.3  # a CAD face's own parameters chart its triangulation where they stretch one direction at most
 CHART_SPREAD = 4.0  # this x the other and their scale varies at most this x over the face (else: its facets, LSCM),
 CONFORMAL_SPREAD = 16.0  # ... or this x where the chart is conformal (sizes enter it divided by its scale)
 CHART_KNOTS = 257  # per parameter, the table that makes a surface of revolution's parameters conformal
@@ -239,8 +239,10 @@ class FaceChart:
     (engine/meshing/surface.py): ``uv(points)`` (k, 2) for points on or near the face, ``lift(uv)`` (k, 3) the
     face's points, ``scale(uv)`` (k,) lengths on the face per length in the chart. Each chart coordinate is a
     table of its parameter: the arc length along the parameter's line through the face's median point (a
-    spline's uneven knots evened out), or, where the parametrisation is a surface of revolution's (its lines
-    at right angles, both speeds functions of one parameter: cones, tori, spheres, revolved splines), the
+    spline's uneven knots evened out; the two then sheared, ``shear``, so that the face's mean metric is the
+    chart's: a twisted loft's lines crossing at a slant), or, where the parametrisation is a surface of
+    revolution's (its lines at right angles, both speeds functions of one parameter: cones, tori, spheres,
+    revolved splines), the
     conformal (Mercator) coordinate along that parameter, so that a Delaunay triangulation in the chart is one
     on the face. A periodic parameter is the chart's first coordinate and ``turn`` its period there (a face
     that may go round: a cone's, a periodic loft's), else ``turn`` is None. A surface of revolution's face that
@@ -259,6 +261,7 @@ class FaceChart:
     sign: float  # -1.0: the chart mirrored, so that it is oriented as seen from outside
     turn: float | None
     polar: float | None = None
+    shear: np.ndarray | None = None  # (2, 2) upper triangular: an arc-length chart's coordinates times it (rows)
 
     @classmethod
     def of(cls, model: CadModel, tag: int, vertices: np.ndarray, centres: np.ndarray, normals: np.ndarray):
@@ -287,21 +290,27 @@ class FaceChart:
         if layout is None or (layout[1] is not None and layout[2] != 1):
             return None
         tables, polar, _ = layout
-        slopes = _slopes(tables, polar, at)
-        away = (slopes > POLE * slopes.max(axis=0)).all(axis=1)  # not at the pole itself
-        sigma = _singular_values(derivative[away] / slopes[away][:, :, None])
-        if (sigma[:, 0] <= 0).any() or (sigma[:, 1] / sigma[:, 0]).max() > CHART_STRETCH:
-            return None
-        if sigma.max() / sigma.min() > (CHART_SPREAD if layout[2] is None else CONFORMAL_SPREAD):
-            return None
         facing = np.einsum("kd,kd->k", np.cross(centre_derivative[:, 0], centre_derivative[:, 1]), normals)
         sign = 1.0 if (facing > 0).sum() >= (facing < 0).sum() else -1.0
         if (sign * facing > 0).mean() < 0.99:
             return None
+        slopes = _slopes(tables, polar, at)
+        away = (slopes > POLE * slopes.max(axis=0)).all(axis=1)  # not at the pole itself
+        jacobian = derivative[away] / slopes[away][:, :, None] * np.array([sign, 1.0])[None, :, None]
+        shear = None
+        if layout[2] is None:  # an arc-length chart: sheared so that the face's mean metric is the chart's
+            shear = np.linalg.cholesky(np.einsum("kid,kjd->ij", jacobian, jacobian) / len(jacobian)).T
+            jacobian = np.einsum("ij,kjd->kid", np.linalg.inv(shear.T), jacobian)
+        sigma = _singular_values(jacobian)
+        if (sigma[:, 0] <= 0).any() or (sigma[:, 1] / sigma[:, 0]).max() > CHART_STRETCH:
+            return None
+        if sigma.max() / sigma.min() > (CHART_SPREAD if layout[2] is None else CONFORMAL_SPREAD):
+            return None
         if polar is not None:  # the angle and the radius turn the other way round than (u, v) where the radius
             sign *= 1.0 if tables[1][1][0] > tables[1][1][-1] else -1.0  # grows with v
-        turn = float(tables[0][1][-1] - tables[0][1][0]) if face.periodic[order[0]] and polar is None else None
-        return cls(model, tag, order, tables, sign, turn, polar)
+        period = float(tables[0][1][-1] - tables[0][1][0])
+        turn = period * (1.0 if shear is None else shear[0, 0]) if face.periodic[order[0]] and polar is None else None
+        return cls(model, tag, order, tables, sign, turn, polar, shear)
 
     def uv(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) chart coordinates of the closest points of the face to ``points`` (k, 3)."""
@@ -311,7 +320,8 @@ class FaceChart:
         first, second = (np.interp(at[:, k], *self.tables[k]) for k in range(2))
         if self.polar is not None:
             return second[:, None] * np.column_stack([np.cos(self.sign * first), np.sin(self.sign * first)])
-        return np.column_stack([self.sign * first, second])
+        chart = np.column_stack([self.sign * first, second])
+        return chart if self.shear is None else chart @ self.shear.T
 
     def lift(self, uv: np.ndarray) -> np.ndarray:
         """(k, 3) the face's points at chart coordinates ``uv`` (k, 2) (a periodic coordinate taken into its
@@ -330,7 +340,10 @@ class FaceChart:
         slopes = _slopes(self.tables, self.polar, at)
         if self.polar is not None:
             return np.linalg.norm(derivative[:, 1], axis=1) / np.maximum(slopes[:, 1], 1e-300)
-        return np.sqrt(_singular_values(derivative / slopes[:, :, None]).prod(axis=1))
+        jacobian = derivative / slopes[:, :, None] * np.array([self.sign, 1.0])[None, :, None]
+        if self.shear is not None:
+            jacobian = np.einsum("ij,kjd->kid", np.linalg.inv(self.shear.T), jacobian)
+        return np.sqrt(_singular_values(jacobian).prod(axis=1))
 
     def _parameters(self, uv: np.ndarray) -> np.ndarray:
         """(k, 2) the face's parameters, in chart order, at chart coordinates ``uv`` (k, 2)."""
@@ -341,9 +354,10 @@ class FaceChart:
             first = middle + np.angle(np.exp(1j * (self.sign * np.arctan2(uv[:, 1], uv[:, 0]) - middle)))
             second = np.hypot(uv[:, 0], uv[:, 1])
         else:
-            first, second = self.sign * uv[:, 0], uv[:, 1]
+            chart = uv if self.shear is None else uv @ np.linalg.inv(self.shear).T
+            first, second = self.sign * chart[:, 0], chart[:, 1]
             if self.turn is not None:
-                first = values0[0] + np.mod(first - values0[0], self.turn)
+                first = values0[0] + np.mod(first - values0[0], values0[-1] - values0[0])
         return np.column_stack([_inverse(first, knots0, values0), _inverse(second, knots1, values1)])
 
 
