@@ -36,7 +36,7 @@ from scipy.sparse import csgraph
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
 from .features import Features, detect_features, unit
-from .fitting import Circle, Cylinder, sweep, torus_kind, tube_sweep
+from .fitting import Circle, Cylinder, sweep, torus_kind, tube_sweep, widest_gap
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -67,6 +67,7 @@ CHART_SPREAD = 4.0  # this x the other and their scale varies at most this x ove
 CONFORMAL_SPREAD = 16.0  # ... or this x where the chart is conformal (sizes enter it divided by its scale)
 CHART_KNOTS = 257  # per parameter, the table that makes a surface of revolution's parameters conformal
 SEPARABLE = 1e-3  # ... a parametrisation whose lines cross at right angles and whose speeds vary along one parameter
+WINDOW_MARGIN = 0.05  # x the period: a periodic parameter unwrapped round its face's middle is charted this far beyond
 POLE = 1e-6  # x its largest: a parameter's speed this small at one end of the other's range is a pole (a dome's top)
 SMOOTH_POLE = 0.02  # a pole is smooth (polar chart) where the circles round it are 2 pi times their radius within this
 MASS_TRUST = 1e-3  # x the volume: OpenCASCADE's volume of the solids is trusted within this (plus twice the chords'
@@ -262,19 +263,31 @@ class FaceChart:
     turn: float | None
     polar: float | None = None
     shear: np.ndarray | None = None  # (2, 2) upper triangular: an arc-length chart's coordinates times it (rows)
+    middle: tuple = (np.nan, np.nan)  # per chart coordinate, the value its periodic parameter is unwrapped round
+    period: np.ndarray | None = None  # per chart coordinate, its parameter's period (range)
 
     @classmethod
-    def of(cls, model: CadModel, tag: int, vertices: np.ndarray, centres: np.ndarray, normals: np.ndarray):
-        """The chart of CAD face ``tag`` whose tessellation has ``vertices`` (n, 3) and triangles with ``centres``
-        and outward unit ``normals`` (t, 3), or None where the face's parameters do not make a fair chart."""
+    def of(cls, model: CadModel, tag: int, vertices: np.ndarray, triangles: np.ndarray, normals: np.ndarray):
+        """The chart of (part of) CAD face ``tag`` tessellated by ``vertices`` (n, 3) and ``triangles`` (t, 3) with
+        outward unit ``normals`` (t, 3), or None where the face's parameters do not make a fair chart. A periodic
+        parameter that the triangles do not go round (half a torus) is unwrapped round the middle of their
+        range (``middle``) and charted as a bounded one."""
         with model.current() as gm:
             face = _parametrized(model.name, gm, 2, tag)
-            if face.periodic.all():
+            middle = _window(face, face.parameters(gm, vertices), triangles)
+            periodic = face.periodic & np.isnan(middle)
+            if periodic.all():
                 return None
-            vertex_at, centre_at = face.parameters(gm, vertices), face.parameters(gm, centres)
-            for order in ((1, 0), (0, 1)) if face.periodic[1] else ((0, 1), (1, 0)):
+            vertex_at = _unwrapped(face.parameters(gm, vertices), middle, face.period)
+            centre_at = _unwrapped(face.parameters(gm, vertices[triangles].mean(axis=1)), middle, face.period)
+            margin = WINDOW_MARGIN * face.period
+            bounds = (
+                np.where(np.isnan(middle), face.low, vertex_at.min(axis=0) - margin),
+                np.where(np.isnan(middle), face.high, vertex_at.max(axis=0) + margin),
+            )
+            for order in ((1, 0), (0, 1)) if periodic[1] else ((0, 1), (1, 0)):
                 at = vertex_at[:, order]
-                low, high = face.low[list(order)], face.high[list(order)]
+                low, high = bounds[0][list(order)], bounds[1][list(order)]
                 lines = []
                 for k in range(2):  # the speeds along each parameter's line through the face's median point
                     line = np.tile(np.median(at, axis=0), (CHART_KNOTS, 1))
@@ -283,7 +296,7 @@ class FaceChart:
                 derivative = _derivative(gm, tag, order, at)
                 if not np.isfinite(derivative).all():
                     return None
-                layout = _chart_tables(at, derivative, lines, low, high, bool(face.periodic[order[0]]))
+                layout = _chart_tables(at, derivative, lines, low, high, bool(periodic[order[0]]))
                 if layout is None or layout[1] is None or layout[2] == 1:
                     break  # a polar chart's angle is its first coordinate: else the other order
             centre_derivative = _derivative(gm, tag, order, centre_at[:, order])
@@ -309,14 +322,16 @@ class FaceChart:
         if polar is not None:  # the angle and the radius turn the other way round than (u, v) where the radius
             sign *= 1.0 if tables[1][1][0] > tables[1][1][-1] else -1.0  # grows with v
         period = float(tables[0][1][-1] - tables[0][1][0])
-        turn = period * (1.0 if shear is None else shear[0, 0]) if face.periodic[order[0]] and polar is None else None
-        return cls(model, tag, order, tables, sign, turn, polar, shear)
+        turn = period * (1.0 if shear is None else shear[0, 0]) if periodic[order[0]] and polar is None else None
+        return cls(
+            model, tag, order, tables, sign, turn, polar, shear, tuple(middle[list(order)]), face.period[list(order)]
+        )
 
     def uv(self, points: np.ndarray) -> np.ndarray:
         """(k, 2) chart coordinates of the closest points of the face to ``points`` (k, 3)."""
         with self.model.current() as gm:
             at = _parametrized(self.model.name, gm, 2, self.tag).parameters(gm, np.asarray(points, float))
-        at = at[:, list(self.order)]
+        at = _unwrapped(at[:, list(self.order)], np.array(self.middle), self.period)
         first, second = (np.interp(at[:, k], *self.tables[k]) for k in range(2))
         if self.polar is not None:
             return second[:, None] * np.column_stack([np.cos(self.sign * first), np.sin(self.sign * first)])
@@ -359,6 +374,27 @@ class FaceChart:
             if self.turn is not None:
                 first = values0[0] + np.mod(first - values0[0], values0[-1] - values0[0])
         return np.column_stack([_inverse(first, knots0, values0), _inverse(second, knots1, values1)])
+
+
+def _window(face: Parametrized, at: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(2,) per parameter of ``face``, the middle of the range the ``triangles`` (t, 3) over vertices with parameters
+    ``at`` (n, 2) cover where the parameter is periodic and they do not go round (no triangle crosses a seam in
+    the widest gap between them), else NaN."""
+    middle = np.full(2, np.nan)
+    for k in np.flatnonzero(face.periodic):
+        turn = 2 * np.pi * (at[:, k] - face.low[k]) / face.period[k]
+        start, gap = widest_gap(turn)
+        seam = start + gap / 2
+        across = np.angle(np.exp(1j * (turn[triangles] - seam - np.pi)))
+        if not (np.ptp(across, axis=1) > np.pi).any():
+            middle[k] = face.low[k] + face.period[k] * np.mod(seam + np.pi, 2 * np.pi) / (2 * np.pi)
+    return middle
+
+
+def _unwrapped(at: np.ndarray, middle: np.ndarray, period: np.ndarray) -> np.ndarray:
+    """``at`` (k, 2) with each parameter that has a ``middle`` (not NaN) taken within half a ``period`` of it."""
+    centre = np.where(np.isnan(middle), 0.0, middle)
+    return np.where(np.isnan(middle), at, centre + np.mod(at - centre + period / 2, period) - period / 2)
 
 
 def _inverse(values: np.ndarray, knots: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -647,6 +683,25 @@ class _CadFaces:
     edge_names: list = dataclasses.field(default_factory=list)
     edge_faces: list = dataclasses.field(default_factory=list)
 
+    def _halved(self, geometry: Geometry, face: np.ndarray, group: np.ndarray) -> np.ndarray:
+        """``group`` (per triangle, 1-based) with each group that is one CAD face periodic both ways (a whole
+        torus) halved across its first parameter, the second half a new group: each half goes round one way
+        only, so that its own parameters chart it (:class:`FaceChart`)."""
+        out = group.copy()
+        for g in range(1, group.max() + 1):
+            rows = np.flatnonzero(group == g)
+            members = np.unique(face[rows])
+            if len(members) != 1 or self.surfaces[members[0]].form in ("Plane", "Cylinder"):
+                continue
+            with self.model.current() as gm:
+                parametrized = _parametrized(self.model.name, gm, 2, int(self.faces[members[0]]))
+                if not parametrized.periodic.all():
+                    continue
+                u = parametrized.parameters(gm, geometry.mesh.triangles_center[rows])[:, 0]
+            low, period = parametrized.low[0], parametrized.period[0]
+            out[rows[np.mod(u - low, period) >= period / 2]] = out.max() + 1
+        return out
+
     def _chart(self, geometry: Geometry, face: np.ndarray, triangles: np.ndarray) -> FaceChart | None:
         """The :class:`FaceChart` of the ``triangles`` (mask over ``geometry``'s) when they are one CAD face (of
         ``face``, per triangle) that is neither a plane nor a cylinder (those have exact charts of their own),
@@ -655,11 +710,12 @@ class _CadFaces:
         if len(members) != 1 or self.surfaces[members[0]].form in ("Plane", "Cylinder"):
             return None
         mesh = geometry.mesh
+        used, local = np.unique(mesh.faces[triangles], return_inverse=True)
         return FaceChart.of(
             self.model,
             int(self.faces[members[0]]),
-            mesh.vertices[np.unique(mesh.faces[triangles])],
-            mesh.triangles_center[triangles],
+            mesh.vertices[used],
+            local.reshape(-1, 3),
             mesh.face_normals[triangles],
         )
 
@@ -687,6 +743,7 @@ class _CadFaces:
         edge_faces = [[k for k in pair if keep[k]] for pair in self.edge_faces]
         group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids)
         group = np.unique(group[face], return_inverse=True)[1] + 1  # per triangle, numbered among the kept faces
+        group = self._halved(geometry, face, group)
         first = np.unique(group, return_index=True)[1]  # a triangle of each group
         charts = [self._chart(geometry, face, group == g) for g in range(1, group.max() + 1)]
         features = detect_features(  # a cylinder's faces, whose facets may fit none (B-spline, short), stay whole

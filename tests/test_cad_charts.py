@@ -3,11 +3,11 @@
 Parts written by Gmsh's OpenCASCADE: a pin whose tip is a full cone (radius 10 to 3: periodic, its scale
 varying 3.3x), a quarter elbow (a torus piece periodic round its tube), a disc with a root fillet (a torus piece
 periodic round its axis), the corpus's block with a B-spline top, a ball on a neck (a sphere with its pole: polar),
-a blind hole's drill point (a cone's apex: not charted) and a ring (a whole torus: periodic both ways, not
-charted). Checked: each charted face is one patch (not cut into charts), periodic ones with their turn; the
-chart is faithful (lift(uv(x)) = x on the face) and, for the surfaces of revolution, conformal (a short step
-on the face is the chart's step times its scale, the same in every direction); the meshes pass the gate with
-the charted faces' nodes on the CAD faces.
+a blind hole's drill point (a cone's apex: not charted) and a ring (a whole torus: periodic both ways, halved).
+Checked: each charted face is one patch (not cut into charts; the ring two), periodic ones with their turn; the
+chart is faithful (lift(uv(x)) = x on the face) and, for the surfaces of revolution, conformal (a short step on
+the face is the chart's step times its scale, the same in every direction); the meshes pass the gate with the
+charted faces' nodes on the CAD faces.
 """
 
 from __future__ import annotations
@@ -146,13 +146,19 @@ def test_a_dome_is_charted_polar_with_its_pole_one_point(step_files):
     assert [p.surface for p, c in zip(drilled.patches, drilled.charts) if c is not None] == []
 
 
-def test_a_face_periodic_both_ways_keeps_the_charts_of_its_facets(step_files):
-    _, _, features = solid_features(step_files["ring"])
-    assert all(c is None for c in features.charts)
-    assert len(features.patches) > 1  # a whole torus is cut (its facets' conformal charts)
+def test_a_whole_torus_is_halved_and_each_half_charted_round_its_tube(step_files):
+    """The ring's one face is periodic both ways and has no border: it is halved across its first parameter
+    (the cut, a curve of no CAD edge), and each half, which goes round the tube only, is charted with the tube's
+    turn, its other parameter unwrapped round the half's middle."""
+    _, geometry, features = solid_features(step_files["ring"])
+    assert [p.names for p in features.patches] == [["face-1"], ["face-1"]]
+    assert all(c is not None and c.turn is not None for c in features.charts)
+    for patch, chart in zip(features.patches, features.charts):
+        on = geometry.vertices[np.unique(geometry.faces[patch.faces])]
+        assert np.abs(chart.lift(chart.uv(on)) - on).max() < 1e-3 * geometry.scale  # facets' chords: 2e-4
 
 
-@pytest.mark.parametrize("part", ["cone_tip_pin", "elbow", "root_fillet_disc", "freeform_top", "ball_on_neck"])
+@pytest.mark.parametrize("part", ["cone_tip_pin", "elbow", "root_fillet_disc", "freeform_top", "ball_on_neck", "ring"])
 def test_charted_faces_mesh_onto_the_cad(step_files, tmp_path, part):
     job = job_from_dict(
         {"geometry": {"file": str(step_files[part])}, "output": {"directory": str(tmp_path), "formats": ["vtu"]}}
