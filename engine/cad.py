@@ -274,11 +274,12 @@ class FaceChart:
         range (``middle``) and charted as a bounded one."""
         with model.current() as gm:
             face = _parametrized(model.name, gm, 2, tag)
-            middle = _window(face, face.parameters(gm, vertices), triangles)
+            vertex_at = face.parameters(gm, vertices)
+            middle = _window(face, vertex_at, triangles)
             periodic = face.periodic & np.isnan(middle)
             if periodic.all():
                 return None
-            vertex_at = _unwrapped(face.parameters(gm, vertices), middle, face.period)
+            vertex_at = _unwrapped(vertex_at, middle, face.period)
             centre_at = _unwrapped(face.parameters(gm, vertices[triangles].mean(axis=1)), middle, face.period)
             margin = WINDOW_MARGIN * face.period
             bounds = (
