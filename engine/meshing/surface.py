@@ -37,9 +37,13 @@ HOLE = 1.0  # a surface triangle whose circumradius exceeds this x h marks a mis
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5  # no node is added nearer than this x h to another
-STRAY_GAP = 0.2  # ... but an input vertex the triangles pass far from (a drill point's tip) down to this x h
+STRAY_GAP = (
+    0.2  # ... but a point of the input the triangles pass far from (a drill point's tip, a facets' fold) down to
+)
+# this x h
 NO_BUBBLE = -1  # the bubble id of a node the mesher adds
 ON_EDGE = 1e-9  # barycentric roundoff within which a point on a chart's border lies on its triangle
+CREASE_PROBES = (0.25, 0.5, 0.75)  # where along each input edge of a conformal chart a chord's deviation is probed
 
 
 @dataclass
@@ -399,7 +403,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     point = np.where(in_triangle[:, None], centre, np.where(on_border[:, None], (a + b + c) / 3, middle))
     # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
     badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
-    stray = np.zeros(len(point), bool)  # which points are input vertices (_stray_vertices)
+    stray = np.zeros(len(point), bool)  # which points are input vertices (_stray_points)
     if chart.kind != "plane":
         lifted = chart.lift(point)
         corners = chart.lift(np.vstack([a, b, c])).reshape(3, -1, 3)
@@ -408,14 +412,15 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
         deviation = np.abs(np.einsum("ij,ij->i", lifted - corners[0], normal))
         badness = np.fmax(badness, deviation / (DEVIATION * h * chart.scale(point)))  # h on the patch
         badness[np.isnan(lifted[:, 0])] = 0.0  # off a conformal chart's triangles: nowhere to put a node
-        if chart.kind == "conformal":  # input vertices the triangles pass far from (a drill point's tip)
-            vertex_uv, vertex_badness, vertex_h = _stray_vertices(chart, uv, tri, corners[0], normal, h)
+        if chart.kind == "conformal":  # input vertices the triangles pass far from (a drill point's tip), and
+            # points of the input edges they cut across (a coarse STL's fold between two facets of a fillet)
+            far_uv, far_badness, far_h = _stray_points(chart, uv, tri, corners[0], normal, h)
             point, badness, h = (
-                np.concatenate([point, vertex_uv]),
-                np.concatenate([badness, vertex_badness]),
-                np.concatenate([h, vertex_h]),
+                np.concatenate([point, far_uv]),
+                np.concatenate([badness, far_badness]),
+                np.concatenate([h, far_h]),
             )
-            stray = np.r_[stray, np.ones(len(vertex_uv), bool)]
+            stray = np.r_[stray, np.ones(len(far_uv), bool)]
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
         return np.zeros((0, 2)), np.zeros(0)
@@ -441,20 +446,21 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
     return point[chosen], spacing[chosen] / 2
 
 
-def _stray_vertices(chart, uv, tri, corner, normal, h):
-    """(uv, badness, h) of the conformal chart's input vertices lying more than DEVIATION x h off the plane of
-    the triangle of ``tri`` (over ``uv``) whose image holds them; ``corner`` and ``normal`` (t, 3): a lifted
-    corner and the unit normal of each triangle, ``h`` (t,) its size."""
+def _stray_points(chart, uv, tri, corner, normal, h):
+    """(uv, badness, h) of the conformal chart's probes (its input vertices and CREASE_PROBES points along its
+    input edges) lying more than DEVIATION x h off the plane of the triangle of ``tri`` (over ``uv``) whose image
+    holds them; ``corner`` and ``normal`` (t, 3): a lifted corner and the unit normal of each triangle, ``h``
+    (t,) its size."""
     flat = np.ascontiguousarray(np.column_stack([uv, np.zeros(len(uv))]))
     faces = np.ascontiguousarray(tri, dtype=np.int64)
-    query = np.ascontiguousarray(np.column_stack([chart.vertex_uv, np.zeros(len(chart.vertex_uv))]))
+    query = np.ascontiguousarray(np.column_stack([chart.probe_uv, np.zeros(len(chart.probe_uv))]))
     squared, face, _ = igl.point_mesh_squared_distance(query, flat, faces)
     inside = np.flatnonzero(squared <= chart.flat_tolerance**2)
     face = face[inside]
-    off = np.abs(np.einsum("ij,ij->i", chart.vertices[inside] - corner[face], normal[face]))
+    off = np.abs(np.einsum("ij,ij->i", chart.probe_xyz[inside] - corner[face], normal[face]))
     badness = np.nan_to_num(off / (DEVIATION * h[face]))
     stray = badness > 1
-    return chart.vertex_uv[inside[stray]], badness[stray], h[face[stray]]
+    return chart.probe_uv[inside[stray]], badness[stray], h[face[stray]]
 
 
 def _crowding(uv, edges, candidate, h) -> np.ndarray:
@@ -518,6 +524,15 @@ class PatchChart:
             self.flat_tree = igl.AABB()  # the chart's triangles in the plane z = 0: exact point location
             self.flat_tree.init(self.flat, self.faces)
             self.flat_tolerance = ON_EDGE * float(np.linalg.norm(np.ptp(self.vertex_uv, axis=0)))
+            edges = np.unique(
+                np.sort(np.concatenate([self.faces[:, [0, 1]], self.faces[:, [1, 2]], self.faces[:, [2, 0]]]), axis=1),
+                axis=0,
+            )
+            t = np.array(CREASE_PROBES)[None, :, None]  # the vertices and points along the input edges, where
+            self.probe_uv, self.probe_xyz = (  # the facets fold: where chords stray from the patch
+                np.vstack([x, (x[edges[:, :1]] * (1 - t) + x[edges[:, 1:]] * t).reshape(-1, x.shape[1])])
+                for x in (self.vertex_uv, self.vertices)
+            )
 
     def _angle(self, x):
         r = x - self.cylinder.point
