@@ -37,10 +37,8 @@ HOLE = 1.0  # a surface triangle whose circumradius exceeds this x h marks a mis
 DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patch is too coarse:
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5  # no node is added nearer than this x h to another
-STRAY_GAP = (
-    0.2  # ... but a point of the input the triangles pass far from (a drill point's tip, a facets' fold) down to
-)
-# this x h
+STRAY_GAP = 0.2  # ... but a point of the input the triangles pass far from (a drill point's tip, a fold between
+# two facets) down to this x h
 NO_BUBBLE = -1  # the bubble id of a node the mesher adds
 ON_EDGE = 1e-9  # barycentric roundoff within which a point on a chart's border lies on its triangle
 CREASE_PROBES = (0.25, 0.5, 0.75)  # where along each input edge of a conformal chart a chord's deviation is probed
