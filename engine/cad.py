@@ -36,7 +36,7 @@ from scipy.sparse import csgraph
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
 from .features import Features, detect_features, unit
-from .fitting import Circle, Cylinder, sweep, torus_kind, tube_sweep, widest_gap
+from .fitting import Circle, Cylinder, seam, sweep, torus_kind, tube_sweep
 from .geometry import Geometry, validate_surface
 
 log = logging.getLogger(__name__)
@@ -383,12 +383,9 @@ def _window(face: Parametrized, at: np.ndarray, triangles: np.ndarray) -> np.nda
     the widest gap between them), else NaN."""
     middle = np.full(2, np.nan)
     for k in np.flatnonzero(face.periodic):
-        turn = 2 * np.pi * (at[:, k] - face.low[k]) / face.period[k]
-        start, gap = widest_gap(turn)
-        seam = start + gap / 2
-        across = np.angle(np.exp(1j * (turn[triangles] - seam - np.pi)))
-        if not (np.ptp(across, axis=1) > np.pi).any():
-            middle[k] = face.low[k] + face.period[k] * np.mod(seam + np.pi, 2 * np.pi) / (2 * np.pi)
+        angle, goes_round = seam(2 * np.pi * (at[:, k] - face.low[k]) / face.period[k], triangles)
+        if not goes_round:
+            middle[k] = face.low[k] + face.period[k] * np.mod(angle + np.pi, 2 * np.pi) / (2 * np.pi)
     return middle
 
 
@@ -691,11 +688,11 @@ class _CadFaces:
         out = group.copy()
         for g in range(1, group.max() + 1):
             rows = np.flatnonzero(group == g)
-            members = np.unique(face[rows])
-            if len(members) != 1 or self.surfaces[members[0]].form in ("Plane", "Cylinder"):
+            tag = self._curved_face(face[rows])
+            if tag is None:
                 continue
             with self.model.current() as gm:
-                parametrized = _parametrized(self.model.name, gm, 2, int(self.faces[members[0]]))
+                parametrized = _parametrized(self.model.name, gm, 2, tag)
                 if not parametrized.periodic.all():
                     continue
                 u = parametrized.parameters(gm, geometry.mesh.triangles_center[rows])[:, 0]
@@ -703,22 +700,23 @@ class _CadFaces:
             out[rows[np.mod(u - low, period) >= period / 2]] = out.max() + 1
         return out
 
-    def _chart(self, geometry: Geometry, face: np.ndarray, triangles: np.ndarray) -> FaceChart | None:
-        """The :class:`FaceChart` of the ``triangles`` (mask over ``geometry``'s) when they are one CAD face (of
-        ``face``, per triangle) that is neither a plane nor a cylinder (those have exact charts of their own),
-        else None."""
-        members = np.unique(face[triangles])
+    def _curved_face(self, face: np.ndarray) -> int | None:
+        """The CAD tag of the one face that triangles of ``face`` (indices of self.faces) all lie on when it is
+        neither a plane nor a cylinder (those have exact charts of their own), else None."""
+        members = np.unique(face)
         if len(members) != 1 or self.surfaces[members[0]].form in ("Plane", "Cylinder"):
+            return None
+        return int(self.faces[members[0]])
+
+    def _chart(self, geometry: Geometry, face: np.ndarray, triangles: np.ndarray) -> FaceChart | None:
+        """The :class:`FaceChart` of the ``triangles`` (mask over ``geometry``'s, ``face`` per triangle) when they
+        lie on one curved CAD face (:meth:`_curved_face`), else None."""
+        tag = self._curved_face(face[triangles])
+        if tag is None:
             return None
         mesh = geometry.mesh
         used, local = np.unique(mesh.faces[triangles], return_inverse=True)
-        return FaceChart.of(
-            self.model,
-            int(self.faces[members[0]]),
-            mesh.vertices[used],
-            local.reshape(-1, 3),
-            mesh.face_normals[triangles],
-        )
+        return FaceChart.of(self.model, tag, mesh.vertices[used], local.reshape(-1, 3), mesh.face_normals[triangles])
 
     @staticmethod
     def kept(vertices, triangles, face, keep) -> np.ndarray:

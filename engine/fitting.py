@@ -230,6 +230,15 @@ def widest_gap(angles: np.ndarray) -> tuple[float, float]:
     return float(ordered[k]), float(gaps[k])
 
 
+def seam(angles: np.ndarray, triangles: np.ndarray) -> tuple[float, bool]:
+    """(the angle of a seam in the middle of the widest empty sector between ``angles`` (n,) (radians) round a
+    circle, whether the ``triangles`` (t, 3) over them go round: one of them crosses that seam)."""
+    start, gap = widest_gap(angles)
+    middle = start + gap / 2
+    across = np.angle(np.exp(1j * (angles[triangles] - middle - np.pi)))
+    return middle, bool((np.ptp(across, axis=1) > np.pi).any())
+
+
 def _cylinder_axis(vertices: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """The axis (3,) of the cylinder through ``vertices`` (k, 3) nearest ``axis``: least squares over the axis
     direction, the centre and the radius (the facets' normals only start it: an STL's triangles that cross the

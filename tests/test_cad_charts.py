@@ -7,7 +7,8 @@ a blind hole's drill point (a cone's apex: not charted) and a ring (a whole toru
 Checked: each charted face is one patch (not cut into charts; the ring two), periodic ones with their turn; the
 chart is faithful (lift(uv(x)) = x on the face) and, for the surfaces of revolution, conformal (a short step on
 the face is the chart's step times its scale, the same in every direction); the meshes pass the gate with the
-charted faces' nodes on the CAD faces.
+charted faces' triangles within 0.08 h of the CAD faces at their centres (the chart's sizes and deviation test
+measured on the face, through its scale).
 """
 
 from __future__ import annotations
@@ -164,11 +165,12 @@ def test_charted_faces_mesh_onto_the_cad(step_files, tmp_path, part):
         {"geometry": {"file": str(step_files[part])}, "output": {"directory": str(tmp_path), "formats": ["vtu"]}}
     )
     result = run(job, write=False)
-    mesh, features, h = result.mesh, result.features, result.sizing.global_size
+    mesh, features = result.mesh, result.features
     assert result.quality["min_dihedral"]["min"] > 15
     for p, chart in enumerate(features.charts):
         if chart is None:
             continue
-        nodes = np.unique(mesh.boundary[mesh.boundary_patch == p])
-        points = mesh.points[nodes]
-        assert np.linalg.norm(features.exact[0][p].project(points) - points, axis=1).max() < 1e-3 * h
+        triangles = mesh.boundary[mesh.boundary_patch == p]
+        centres = mesh.points[triangles].mean(axis=1)
+        chord = np.linalg.norm(features.exact[0][p].project(centres) - centres, axis=1) / result.sizing(centres)
+        assert chord.max() < 0.08  # the chart's deviation test: 0.06 h at a circumcentre (0.012-0.056 measured)

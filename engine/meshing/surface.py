@@ -24,7 +24,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from ..errors import GeometryError
 from ..features import conformal_map, coordinates, curve_sides, describe
-from ..fitting import widest_gap
+from ..fitting import seam
 from ..packing import CORNER, CURVE, PATCH, Packing
 
 SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaunay is local)
@@ -507,12 +507,10 @@ class PatchChart:
             e1 /= np.linalg.norm(e1)
             self.kind, self.cylinder, self.e1, self.e2 = "cylinder", c, e1, np.cross(c.axis, e1)
             self.sign = -1.0 if c.concave else 1.0  # outward normal -e_r on a concave patch: mirror
-            angle = self._angle(self.vertices)
-            start, gap = widest_gap(angle)
-            self.middle = start + gap / 2  # the seam's angle: in the widest empty sector of the patch, ...
-            across = np.angle(np.exp(1j * (angle[self.faces] - self.middle - np.pi)))
-            if (np.ptp(across, axis=1) > np.pi).any():  # ... unless a triangle crosses it: the patch goes round
-                self.turn, self.middle = 2 * np.pi * c.radius, -np.pi  # (a keyed bore's 330 degrees does not)
+            # the seam in the widest empty sector of the patch, unless a triangle crosses it there
+            self.middle, goes_round = seam(self._angle(self.vertices), self.faces)
+            if goes_round:  # the patch goes round: a periodic strip (a keyed bore's 330 degrees does not)
+                self.turn, self.middle = 2 * np.pi * c.radius, -np.pi
         elif given is not None:
             self.kind, self.given, self.turn = "parametric", given, given.turn
         else:
