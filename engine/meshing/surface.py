@@ -38,7 +38,8 @@ DEVIATION = 0.06  # ... and one whose chord strays this x h from its curved patc
 REFINE_ROUNDS = 8  # both get a node at their circumcentre, in up to this many rounds
 MIN_GAP = 0.5  # no node is added nearer than this x h to another
 STRAY_GAP = 0.2  # ... but a point of the input the triangles pass far from (a drill point's tip, a fold between
-# two facets) down to this x h
+# two facets) down to this x h from curve, corner and added nodes; it takes the place of the nearest patch node
+# within MIN_GAP
 NO_BUBBLE = -1  # the bubble id of a node the mesher adds
 ON_EDGE = 1e-9  # barycentric roundoff within which a point on a chart's border lies on its triangle
 CREASE_PROBES = (0.25, 0.5, 0.75)  # where along each input edge of a conformal chart a chord's deviation is probed
@@ -291,23 +292,29 @@ def _triangulate_patch(chart, points, radius, constraints, droppable, constraine
     """One patch's surface triangulation in its ``chart``, refined where the packing left a hole.
 
     Returns (triangles over the nodes then the added points, counter-clockwise
-    seen from outside; ``droppable`` nodes left out for crowding the border;
+    seen from outside; ``droppable`` nodes left out for crowding the border or for a stray input point that
+    took their place (``_holes``);
     constrained edges the triangulation misses; added points (k, 3) and their radii). ``constrained``: a
     Delaunay triangulation that misses constrained edges is replaced by a constrained one.
     """
     uv = chart.uv(points)
     radius = radius / chart.scale(uv)  # sizes in the chart's lengths
     added_uv, added_radius = np.zeros((0, 2)), np.zeros(0)
+    displaced = np.zeros(len(uv), bool)  # packing nodes a stray point took the place of
     for round in range(REFINE_ROUNDS + 1):
         all_uv, all_radius = np.vstack([uv, added_uv]), np.concatenate([radius, added_radius])
         all_droppable = np.concatenate([droppable, np.ones(len(added_uv), bool)])
-        tri, crowded, lost = _triangulate_chart(chart, all_uv, all_radius, constraints, all_droppable, constrained)
+        left_out = np.r_[displaced, np.zeros(len(added_uv), bool)]
+        tri, crowded, lost = _triangulate_chart(
+            chart, all_uv, all_radius, constraints, all_droppable, constrained, left_out
+        )
         if len(lost) or round == REFINE_ROUNDS:
             break
-        new_uv, new_radius = _holes(chart, all_uv, all_radius, tri, constraints, crowded)
+        new_uv, new_radius, taken = _holes(chart, all_uv, all_radius, tri, constraints, crowded, droppable)
         if len(new_uv) == 0:
             break
         added_uv, added_radius = np.vstack([added_uv, new_uv]), np.concatenate([added_radius, new_radius])
+        displaced[taken] = True
     kept_added = np.setdiff1d(np.arange(len(added_uv)), crowded - len(uv))
     renumber = np.arange(len(all_uv))  # crowded added points are forgotten rather than dropped
     renumber[len(uv) + kept_added] = len(uv) + np.arange(len(kept_added))
@@ -315,13 +322,14 @@ def _triangulate_patch(chart, points, radius, constraints, droppable, constraine
     return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv), added_radius * chart.scale(added_uv))
 
 
-def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained):
-    """(triangles, crowded nodes, lost constrained edges) of one chart. A periodic strip whose two copies
-    of the seam band triangulate a nearly co-circular set differently (roundoff decides) leaves triangles
-    that pair with no neighbour, or a region on both sides of a chain (a seam through a cross bore's loop on
-    a bore's wall): then the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
+def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained, left_out):
+    """(triangles, crowded nodes, lost constrained edges) of one chart, the ``left_out`` nodes (a mask) among the
+    crowded ones. A periodic strip whose two copies of the seam band triangulate a nearly co-circular set
+    differently (roundoff decides) leaves triangles that pair with no neighbour, or a region on both sides of a
+    chain (a seam through a cross bore's loop on a bore's wall): then the seam moves by SEAM_SHIFT of a turn and
+    the strip is tried again."""
     if chart.turn is None:
-        return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained)
+        return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, left_out)
     result, failure = None, None
     for attempt in range(SEAM_TRIES):
         turned = uv.copy()
@@ -329,7 +337,7 @@ def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained):
             np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
         )
         try:
-            result = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained)
+            result = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained, left_out)
         except RuntimeError as error:  # a region on both sides of its boundary, with this seam
             failure = error
             continue
@@ -349,13 +357,15 @@ def _paired(tri, constraints) -> bool:
     return bool(np.isin(key[lone], constraints[:, 0] * n + constraints[:, 1]).all())
 
 
-def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained):
+def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, left_out):
     original = np.arange(len(uv))
     copies = chart.copies(uv, radius)
     extended = np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])
     original = np.concatenate([original] + [rows for rows, _ in copies])
     edges = _constraint_copies(constraints, original, extended)
-    crowded = np.unique(original[_crowding(extended, edges, droppable[original], 2 * radius[original])])
+    crowded = np.union1d(
+        original[_crowding(extended, edges, droppable[original], 2 * radius[original])], np.flatnonzero(left_out)
+    )
     if len(crowded):
         rows = ~np.isin(original, crowded)
         edges = (np.cumsum(rows) - 1)[edges]  # constrained edges join curve nodes, which stay
@@ -371,14 +381,16 @@ def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained):
     return original[tri[inside]], crowded, original[lost].reshape(-1, 2)
 
 
-def _holes(chart, uv, radius, tri, constraints, crowded):
+def _holes(chart, uv, radius, tri, constraints, crowded, droppable):
     """Points (uv, radius) to add where the triangulation is too coarse for the surface or the size:
     triangles whose chord strays more than DEVIATION x h from the curved patch, or acute ones whose
-    circumradius exceeds HOLE x h (a bubble missing), and, on a conformal chart, the input vertices that lie
+    circumradius exceeds HOLE x h (a bubble missing), and, on a conformal chart, the input's points that lie
     more than DEVIATION x h off the triangle over them (a cone's tip inside a triangle: the vertex itself is
-    the point). The point is the circumcentre where it lies in its triangle,
+    the point; a fold between two facets). The point is the circumcentre where it lies in its triangle,
     else the middle of its longest edge (the centroid when that edge is on the border); one per hole, none near
-    a node or the border."""
+    a node or the border. A stray input point takes the place of the nearest ``droppable`` packing node (a mask
+    over the first nodes of ``uv``) within MIN_GAP x h of it; the third value is their indices. Kept beside it, a
+    probe on a fold left edges of 0.4 h across the fold and a flat cap of four surface nodes over it."""
     a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
     if chart.turn is not None:  # a triangle across the seam: its corners within half a turn of the first
         b, c = (
@@ -421,27 +433,39 @@ def _holes(chart, uv, radius, tri, constraints, crowded):
             stray = np.r_[stray, np.ones(len(far_uv), bool)]
     big = np.flatnonzero(badness > 1)
     if len(big) == 0:
-        return np.zeros((0, 2)), np.zeros(0)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64)
     big = big[np.argsort(-badness[big], kind="stable")]
     point, spacing, stray = point[big], h[big], stray[big]
-    present = uv[np.setdiff1d(np.arange(len(uv)), crowded)]
+    index = np.setdiff1d(np.arange(len(uv)), crowded)  # the nodes present, and then their copies across a seam
+    present = uv[index]
     if chart.turn is not None:  # back into the turn; nodes across the seam count as neighbours
         point[:, 0] -= chart.turn * np.round(point[:, 0] / chart.turn)
         present = np.vstack([present, present + [chart.turn, 0.0], present - [chart.turn, 0.0]])
+        index = np.tile(index, 3)
         # an edge across the seam spans the whole strip here: not a border to keep off
         constraints = constraints[np.abs(np.diff(uv[constraints, 0], axis=1)[:, 0]) < chart.turn / 2]
-    keep = cKDTree(present).query(point)[0] > np.where(stray, STRAY_GAP, MIN_GAP) * spacing
+    movable = np.zeros(len(index), bool)
+    movable[index < len(droppable)] = droppable[index[index < len(droppable)]]
+    nearest = cKDTree(present).query(point)[0]
+    nearest_fixed = cKDTree(present[~movable]).query(point)[0] if (~movable).any() else np.full(len(point), np.inf)
+    keep = np.where(stray, nearest_fixed > STRAY_GAP * spacing, nearest > MIN_GAP * spacing)
     keep[
         _crowding(np.vstack([uv, point]), constraints, np.r_[np.zeros(len(uv), bool), keep], np.r_[2 * radius, spacing])
         - len(uv)
     ] = False
-    point, spacing = point[keep], spacing[keep]
+    point, spacing, stray = point[keep], spacing[keep], stray[keep]
     chosen = np.ones(len(point), bool)
     neighbours = cKDTree(point).query_ball_point(point, MIN_GAP * spacing)
     for i, near in enumerate(neighbours):  # one point per hole: the worst triangle's, which come first
         if chosen[i]:
             chosen[[j for j in near if j > i]] = False
-    return point[chosen], spacing[chosen] / 2
+    point, spacing, stray = point[chosen], spacing[chosen], stray[chosen]
+    if stray.any() and movable.any():
+        gap, nearest_movable = cKDTree(present[movable]).query(point[stray])
+        taken = index[movable][nearest_movable[gap < MIN_GAP * spacing[stray]]]
+    else:
+        taken = np.zeros(0, np.int64)
+    return point, spacing / 2, np.unique(taken)
 
 
 def _stray_points(chart, uv, tri, corner, normal, h):
