@@ -137,7 +137,7 @@ class Features:
     assembly: object | None = None  # touching solids of a CAD file (engine/cad.py ``Assembly``): meshed body by
     # body with conforming interfaces (engine/assembly.py); None for one solid or solids apart
     charts: tuple = ()  # per patch, the chart its surface triangulation is made in when the input gives one (a
-    # CAD face's own parameters: engine/cad.py ``FaceChart``), else None; empty: none given
+    # CAD face's own parameters: engine/facechart.py ``FaceChart``), else None; empty: none given
 
     def named(self, name: str) -> list:
         """All features carrying ``name``."""

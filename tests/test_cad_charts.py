@@ -1,4 +1,4 @@
-"""A CAD face's surface triangulation in its own parameters (issue 17 item 2): engine/cad.py ``FaceChart``.
+"""A CAD face's surface triangulation in its own parameters (issue 17 item 2): engine/facechart.py ``FaceChart``.
 
 Parts written by Gmsh's OpenCASCADE: a pin whose tip is a full cone (radius 10 to 3: periodic, its scale
 varying 3.3x), a quarter elbow (a torus piece periodic round its tube), a disc with a root fillet (a torus piece

@@ -505,7 +505,7 @@ def _crowding(uv, edges, candidate, h) -> np.ndarray:
 class PatchChart:
     """A patch flattened: ``uv(points)`` orientation-preserving seen from outside, ``lift(uv)`` back onto
     the patch's input triangles. A plane is projected, a cylinder unrolled, a CAD face with a ``given`` chart
-    (its own parameters, engine/cad.py ``FaceChart``) mapped by it (and lifted onto the face itself), any other
+    (its own parameters, engine/facechart.py ``FaceChart``) mapped by it (and lifted onto the face itself), any other
     patch mapped by a least-squares conformal map of its input triangles. A full cylinder's strip, or a given
     chart's periodic one, is periodic (``turn``)."""
 
