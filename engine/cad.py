@@ -441,7 +441,7 @@ class _CadFaces:
             if tag is None:
                 continue
             with self.model.current() as gm:
-                parametrized = _parametrized(self.model.name, gm, 2, tag)
+                parametrized = self.model.parametrized(gm, 2, tag)
                 if not parametrized.periodic.all():
                     continue
                 u = parametrized.parameters(gm, geometry.mesh.triangles_center[rows])[:, 0]

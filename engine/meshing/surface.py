@@ -304,9 +304,9 @@ def _triangulate_patch(chart, points, radius, constraints, droppable, constraine
     for round in range(REFINE_ROUNDS + 1):
         all_uv, all_radius = np.vstack([uv, added_uv]), np.concatenate([radius, added_radius])
         all_droppable = np.concatenate([droppable, np.ones(len(added_uv), bool)])
-        left_out = np.r_[displaced, np.zeros(len(added_uv), bool)]
+        all_displaced = np.r_[displaced, np.zeros(len(added_uv), bool)]
         tri, crowded, lost = _triangulate_chart(
-            chart, all_uv, all_radius, constraints, all_droppable, constrained, left_out
+            chart, all_uv, all_radius, constraints, all_droppable, constrained, all_displaced
         )
         if len(lost) or round == REFINE_ROUNDS:
             break
@@ -322,14 +322,14 @@ def _triangulate_patch(chart, points, radius, constraints, droppable, constraine
     return (renumber[tri], crowded[crowded < len(uv)], lost, chart.lift(added_uv), added_radius * chart.scale(added_uv))
 
 
-def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained, left_out):
-    """(triangles, crowded nodes, lost constrained edges) of one chart, the ``left_out`` nodes (a mask) among the
-    crowded ones. A periodic strip whose two copies of the seam band triangulate a nearly co-circular set
-    differently (roundoff decides) leaves triangles that pair with no neighbour, or a region on both sides of a
-    chain (a seam through a cross bore's loop on a bore's wall): then the seam moves by SEAM_SHIFT of a turn and
-    the strip is tried again."""
+def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained, displaced):
+    """(triangles, crowded nodes, lost constrained edges) of one chart, the ``displaced`` nodes (a mask: a stray
+    point took their place) among the crowded ones. A periodic strip whose two copies of the seam band
+    triangulate a nearly co-circular set differently (roundoff decides) leaves triangles that pair with no
+    neighbour, or a region on both sides of a chain (a seam through a cross bore's loop on a bore's wall): then
+    the seam moves by SEAM_SHIFT of a turn and the strip is tried again."""
     if chart.turn is None:
-        return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, left_out)
+        return _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, displaced)
     result, failure = None, None
     for attempt in range(SEAM_TRIES):
         turned = uv.copy()
@@ -337,7 +337,7 @@ def _triangulate_chart(chart, uv, radius, constraints, droppable, constrained, l
             np.mod(uv[:, 0] + attempt * SEAM_SHIFT * chart.turn + chart.turn / 2, chart.turn) - chart.turn / 2
         )
         try:
-            result = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained, left_out)
+            result = _triangulate_strip(chart, turned, radius, constraints, droppable, constrained, displaced)
         except RuntimeError as error:  # a region on both sides of its boundary, with this seam
             failure = error
             continue
@@ -357,14 +357,14 @@ def _paired(tri, constraints) -> bool:
     return bool(np.isin(key[lone], constraints[:, 0] * n + constraints[:, 1]).all())
 
 
-def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, left_out):
+def _triangulate_strip(chart, uv, radius, constraints, droppable, constrained, displaced):
     original = np.arange(len(uv))
     copies = chart.copies(uv, radius)
     extended = np.vstack([uv] + [uv[rows] + shift for rows, shift in copies])
     original = np.concatenate([original] + [rows for rows, _ in copies])
     edges = _constraint_copies(constraints, original, extended)
     crowded = np.union1d(
-        original[_crowding(extended, edges, droppable[original], 2 * radius[original])], np.flatnonzero(left_out)
+        original[_crowding(extended, edges, droppable[original], 2 * radius[original])], np.flatnonzero(displaced)
     )
     if len(crowded):
         rows = ~np.isin(original, crowded)
@@ -413,7 +413,7 @@ def _holes(chart, uv, radius, tri, constraints, crowded, droppable):
     point = np.where(in_triangle[:, None], centre, np.where(on_border[:, None], (a + b + c) / 3, middle))
     # an acute triangle's circumcircle is an empty disk inside the triangle: a hole when wider than HOLE h
     badness = np.where(in_triangle, la * lb * lc / np.maximum(2 * double_area, 1e-300) / (HOLE * h), 0.0)
-    stray = np.zeros(len(point), bool)  # which points are input vertices (_stray_points)
+    stray = np.zeros(len(point), bool)  # which points are the input's own (_stray_points)
     if chart.kind != "plane":
         lifted = chart.lift(point)
         corners = chart.lift(np.vstack([a, b, c])).reshape(3, -1, 3)
