@@ -53,7 +53,7 @@ def measure(job: dict, diameter: float | None, packer: str = "bubble") -> dict:
         seconds = time.perf_counter() - start
     finally:
         pipeline.load_knowledge = original
-    nodes, tets = result.sizing.expected_counts
+    nodes, tets = result.sizing.expected_counts.nodes, result.sizing.expected_counts.tets
     return {
         "median": result.conformity["median"],
         "element_median": float(np.median(result.audit.cells["size_ratio"])),

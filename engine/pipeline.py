@@ -265,7 +265,7 @@ def prepare(job: Job, max_elements: float | None = None, timings: dict | None = 
     with stage("sizing", timings):
         sizing = build_sizing(job, geometry, features, kb)
         try:
-            expected = check_element_limit(sizing, max_elements)
+            expected = check_element_limit(sizing, max_elements, job.output_order)
         except LimitError as error:
             raise LimitError(error.what, where=job.where("size"), fix=error.fix) from None
     log.info(

@@ -834,12 +834,12 @@ def test_impossible_size_hits_element_limit(capsys, tmp_path):
 
 
 def test_the_default_limit_is_what_the_machine_s_memory_holds(capsys, tmp_path, monkeypatch):
-    """With no --max-elements the guard's limit is 2e7, or fewer on a machine whose memory holds fewer at the
-    measured peak per tetrahedron: an outside test's heat sink (1e7 tets at its default size) ran 70 s and
-    died of a MemoryError (exit 3), or was killed by the kernel with no message at all."""
+    """With no --max-elements the guard refuses more than 2e7 tetrahedra, or a run expected to need more memory at
+    its peak than the machine has: an outside test's heat sink (1e7 tets at its default size) ran 70 s and died
+    of a MemoryError (exit 3), or was killed by the kernel with no message at all."""
     from engine.sizing import counts
 
-    monkeypatch.setattr(counts, "physical_memory", lambda: 2**30)  # 1 GiB: about 3e5 tetrahedra
+    monkeypatch.setattr(counts, "physical_memory", lambda: 2.0**29)  # 0.5 GiB; the junction at size 2 needs ~1 GiB
     job = write_job(
         tmp_path,
         """
@@ -852,11 +852,14 @@ def test_the_default_limit_is_what_the_machine_s_memory_holds(capsys, tmp_path, 
     )
     code, _, err = run_cli(capsys, job)
     line = error_line(err)
-    assert code == 2 and "1.0 GiB at about 3.5 kB per tetrahedron" in line and "--max-elements" in line
+    assert code == 2 and "GiB of memory at the run's peak: this machine has 0.5 GiB" in line
+    assert "--max-elements" in line
     assert not mesh_files(tmp_path)
-    assert counts.default_element_limit()[0] == pytest.approx(2**30 / counts.PEAK_BYTES_PER_TET)
-    monkeypatch.setattr(counts, "physical_memory", lambda: 2.0**40)
-    assert counts.default_element_limit()[0] == counts.MAX_ELEMENTS
+    tets = 1e6
+    small = counts.ExpectedCounts(nodes=tets / 5.5, boundary_nodes=0.1 * tets / 5.5, tets=tets, patterns=2)
+    assert 0.3e9 < small.peak_bytes() < small.peak_bytes(order=2) < 2e9
+    finned = small._replace(boundary_nodes=0.7 * tets / 5.5)
+    assert finned.peak_bytes() > small.peak_bytes(), "a boundary node costs more than an interior one"
 
 
 def test_running_out_of_memory_is_one_line(capsys, tmp_path, monkeypatch):

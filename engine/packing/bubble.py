@@ -500,7 +500,7 @@ def _statistics(packing: Packing, sizing, run: PackingRun) -> dict:
     """Counts (against the sizing field's estimate), nearest-neighbour distance / r0 (r0 from the run's bubble
     diameters) of the packing and of its starting places (each level's start beside the settled lower levels),
     events, timings."""
-    expected_nodes, _ = sizing.expected_counts
+    expected_nodes = sizing.expected_counts.nodes
     bubbles, initial_points, events = run.bubbles, np.concatenate(run.starts), packing.events
     return {
         "nodes": len(packing),

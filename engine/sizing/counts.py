@@ -1,10 +1,12 @@
 """The element-count estimate of a sizing field (nodes and tetrahedra a packing of it should have, fitted to
-the bubble packings) and the guard that refuses a job before packing when it would need too many."""
+the bubble packings), the run's peak memory it implies, and the guard that refuses a job before packing when
+it would need too many elements or more memory than the machine has."""
 
 from __future__ import annotations
 
 import math
 import os
+from typing import NamedTuple
 
 import numpy as np
 import trimesh
@@ -14,20 +16,50 @@ from ..errors import LimitError
 TETS_PER_NODE = 5.5  # tetrahedra per node of a well-spaced Delaunay mesh
 MAX_ELEMENTS = 20_000_000  # the default limit of the guard, where the machine's memory holds more
 GRADED = 1e-6  # a size this much below the raw size of the pattern that wins there is set by the gradation
-PEAK_BYTES_PER_TET = 3500.0  # memory at the run's peak per tetrahedron: measured 1.5 kB (a flanged tee, 1.07M
-# tets, default job), 1.65 kB (32 patterns, 1.58M) and 3.2 kB (a thin ribbed shell under static-stress, 4.48M
-# tets, killed by the kernel at 14.5 GB): a job expected to need more than the machine has is refused up front
 NODES_PER_H3 = 1.43  # nodes per h^3 of volume of a mesh whose mean edge is h (fitted, see estimate_counts)
 NODES_PER_H2 = 0.32  # extra nodes per h^2 of surface (fitted, see estimate_counts)
 NODES_PER_H = 1.15  # nodes per h along a feature curve: 1 / the bubble diameter (0.87 h), see estimate_counts
+BOUNDARY_NODES_PER_H2 = 1.25  # boundary nodes per h^2 of surface (measured 1.21-1.27: junction, heat sink, plate)
+PEAK_BASE_BYTES = 0.36e9  # the run's peak memory: interpreter, libraries, input (see ExpectedCounts.peak_bytes)
+PEAK_BYTES_PER_NODE = 3000.0  # per interior node: packing, Delaunay, improvement, quality, output
+PEAK_BYTES_PER_BOUNDARY_NODE = 4700.0  # per boundary node: surface packing and triangulation on top
+PEAK_BYTES_PER_TET_PATTERN = 24.0  # per tetrahedron and placed pattern: the audit's memberships and sizes
+PEAK_BYTES_PER_QUADRATIC_TET = 450.0  # per tetrahedron of a 10-node mesh: mid-edge nodes, curving, output
 
 
-def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, seed: int = 0) -> tuple[float, float]:
-    """Expected (nodes, tetrahedra) of a mesh of the sizing field: h is the mean edge length (docs/rules.md
-    section 4), which the bubble packer meets with bubbles of diameter 0.87 h (its ``diameter`` setting).
+class ExpectedCounts(NamedTuple):
+    """What a packing of a sizing field should come to (:func:`estimate_counts`), and the peak memory of the run
+    that meshes it."""
+
+    nodes: float
+    boundary_nodes: float  # of ``nodes``, on the solid's surface
+    tets: float
+    patterns: int  # placed patterns, each audited at every element
+
+    def peak_bytes(self, order: int = 1) -> float:
+        """The expected peak resident memory (bytes) of the run, files of element ``order`` written:
+        PEAK_BASE_BYTES + PEAK_BYTES_PER_NODE per interior node + PEAK_BYTES_PER_BOUNDARY_NODE per boundary node
+        + PEAK_BYTES_PER_TET_PATTERN per tetrahedron and placed pattern (+ PEAK_BYTES_PER_QUADRATIC_TET per
+        tetrahedron at order 2). Fitted to full runs (VmHWM): the junction at 1.5M, 4.4M and 10.2M tets, a heat
+        sink's fins, a 2 mm plate, a flange under static-stress (12 patterns), each within 15 %."""
+        interior = max(self.nodes - self.boundary_nodes, 0.0)
+        return (
+            PEAK_BASE_BYTES
+            + PEAK_BYTES_PER_NODE * interior
+            + PEAK_BYTES_PER_BOUNDARY_NODE * self.boundary_nodes
+            + PEAK_BYTES_PER_TET_PATTERN * self.tets * self.patterns
+            + (PEAK_BYTES_PER_QUADRATIC_TET * self.tets if order == 2 else 0.0)
+        )
+
+
+def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, seed: int = 0) -> ExpectedCounts:
+    """Expected nodes (all, and on the boundary) and tetrahedra of a mesh of the sizing field: h is the mean edge
+    length (docs/rules.md section 4), which the bubble packer meets with bubbles of diameter 0.87 h (its
+    ``diameter`` setting).
 
     nodes = NODES_PER_H3 * integral of h^-3 over the volume + NODES_PER_H2 * integral
-    of h^-2 over the surface + NODES_PER_H * integral of h^-1 along the feature curves + corners.
+    of h^-2 over the surface + NODES_PER_H * integral of h^-1 along the feature curves + corners;
+    boundary nodes = BOUNDARY_NODES_PER_H2 * the same surface integral.
     The volume integral samples one random point in each cell of a grid of about
     ``samples`` cells over the bounding box (stratified, seeded: far less variance than
     as many independent points); the surface integral ``samples // 4`` area-weighted points.
@@ -43,16 +75,15 @@ def estimate_counts(geometry, sizing, features=None, samples: int = 1 << 16, see
     inside = geometry.contains(points)
     volume_density = float(np.mean(sizing(points[inside]) ** -3.0)) if inside.any() else sizing.h_min**-3.0
     on_surface, _ = trimesh.sample.sample_surface(geometry.mesh, samples // 4, seed=seed)
-    nodes = NODES_PER_H3 * geometry.volume * volume_density + NODES_PER_H2 * geometry.area * float(
-        np.mean(sizing(on_surface) ** -2.0)
-    )
+    surface = geometry.area * float(np.mean(sizing(on_surface) ** -2.0))
+    nodes = NODES_PER_H3 * geometry.volume * volume_density + NODES_PER_H2 * surface
     if features is not None:
         for curve in features.curves:
             if curve.on_surface:
                 s = np.linspace(0.0, curve.length, 200)
                 nodes += NODES_PER_H * curve.length * float(np.mean(1.0 / sizing(curve.point_at(s))))
         nodes += len(features.corners)
-    return nodes, nodes * TETS_PER_NODE
+    return ExpectedCounts(nodes, BOUNDARY_NODES_PER_H2 * surface, nodes * TETS_PER_NODE, len(sizing.placed))
 
 
 def stratified_points(lo: np.ndarray, hi: np.ndarray, count: int, rng) -> np.ndarray:
@@ -70,16 +101,6 @@ def physical_memory() -> float:
         return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
     except (ValueError, OSError, AttributeError):
         return math.inf
-
-
-def default_element_limit() -> tuple[float, str]:
-    """The guard's limit when none is given: MAX_ELEMENTS, or fewer where this machine's memory holds fewer at
-    PEAK_BYTES_PER_TET; with the reason, for the message."""
-    memory = physical_memory()
-    fits = memory / PEAK_BYTES_PER_TET
-    if fits < MAX_ELEMENTS:
-        return fits, f"this machine's {memory / 2**30:.1f} GiB at about {PEAK_BYTES_PER_TET / 1e3:g} kB per tetrahedron"
-    return float(MAX_ELEMENTS), "the default"
 
 
 def pattern_shares(sizing, samples: int = 1 << 15, seed: int = 0) -> dict[str, float]:
@@ -107,32 +128,40 @@ def _sampled(sizing, samples: int, seed: int):
     return evaluation, evaluation.h**-3.0
 
 
-def check_element_limit(sizing, max_elements: float | None = None) -> float:
-    """Refuse (one line) when the sizes would need more than ``max_elements`` tetrahedra (None: the default,
-    :func:`default_element_limit`)."""
-    _, tets = sizing.expected_counts
-    limit, why = (max_elements, "") if max_elements is not None else default_element_limit()
+def check_element_limit(sizing, max_elements: float | None = None, order: int = 1) -> float:
+    """The expected tetrahedra; refuse (one line) when the sizes would need more than ``max_elements`` of them,
+    or, when that is None, more than MAX_ELEMENTS or more memory at the peak of a run writing elements of
+    ``order`` than this machine has (:meth:`ExpectedCounts.peak_bytes`)."""
+    expected = sizing.expected_counts
+    tets = expected.tets
+    limit = MAX_ELEMENTS if max_elements is None else max_elements
     if not math.isfinite(tets) or tets > limit:
-        placed, share, graded = densest_pattern(sizing)
-        if placed is None:
-            where = ""
-        elif graded:
-            where = (
-                f"; {100 * share:.0f} % of them lie where the size grows (by the gradation, "
-                f"{sizing.gradation:g}) from the {sizing.h_min:.4g} that '{placed.id}' (pattern "
-                f"'{placed.placement.pattern}', placed by {placed.placement.origin}) sets"
-            )
-        else:
-            where = (
-                f"; {100 * share:.0f} % of them lie where '{placed.id}' (pattern '{placed.placement.pattern}', "
-                f"placed by {placed.placement.origin}) sets the size"
-            )
-        raise LimitError(
-            f"the sizes would need about {tets:.3g} tetrahedra (limit {limit:.3g}{': ' + why if why else ''}); "
-            f"the smallest size is {sizing.h_min:.4g}{where}",
-            fix=_coarser(placed) + "use larger sizes, or raise the limit with --max-elements",
+        over = f"limit {limit:.3g}"
+    elif max_elements is None and expected.peak_bytes(order) > physical_memory():
+        over = (
+            f"and about {expected.peak_bytes(order) / 2**30:.3g} GiB of memory at the run's peak: this machine has "
+            f"{physical_memory() / 2**30:.1f} GiB"
         )
-    return tets
+    else:
+        return tets
+    placed, share, graded = densest_pattern(sizing)
+    if placed is None:
+        where = ""
+    elif graded:
+        where = (
+            f"; {100 * share:.0f} % of them lie where the size grows (by the gradation, "
+            f"{sizing.gradation:g}) from the {sizing.h_min:.4g} that '{placed.id}' (pattern "
+            f"'{placed.placement.pattern}', placed by {placed.placement.origin}) sets"
+        )
+    else:
+        where = (
+            f"; {100 * share:.0f} % of them lie where '{placed.id}' (pattern '{placed.placement.pattern}', "
+            f"placed by {placed.placement.origin}) sets the size"
+        )
+    raise LimitError(
+        f"the sizes would need about {tets:.3g} tetrahedra ({over}); the smallest size is {sizing.h_min:.4g}{where}",
+        fix=_coarser(placed) + "use larger sizes, or raise the limit with --max-elements",
+    )
 
 
 def _coarser(placed) -> str:

@@ -13,7 +13,7 @@ from scipy import ndimage
 
 from .._numba import numba
 from ..errors import KnowledgeError
-from .counts import estimate_counts
+from .counts import ExpectedCounts, estimate_counts
 
 if TYPE_CHECKING:
     from ..features import Features
@@ -152,8 +152,8 @@ class SizingField:
         return [p.legend() for p in self.placed]
 
     @cached_property
-    def expected_counts(self) -> tuple[float, float]:
-        """(nodes, tetrahedra) a packing of this field should have (:func:`estimate_counts`), computed once."""
+    def expected_counts(self) -> ExpectedCounts:
+        """The nodes and tetrahedra a packing of this field should have (:func:`estimate_counts`), computed once."""
         return estimate_counts(self.geometry, self, self.features)
 
 
