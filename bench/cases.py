@@ -5,7 +5,7 @@ patterns of the junction-edge recipe.
 The Gmsh reference case of ../shared/reference/NOTES.md is the junction-edge recipe at global size 1.8
 (h = 1.5 at the junction, about 1.02M tetrahedra). ``junction_job(case, scale)`` multiplies every size of
 that field by ``scale`` (H = 1.8 s and the pattern's ``near`` = 0.06 s), so the field keeps its shape and
-the element count falls as about s^-3: one family of fields from 10k to 1M tetrahedra.
+the element count falls as about s^-3: one family of fields from 10k to 10M tetrahedra.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from engine.shapes import SHAPES
 REFERENCE_SIZE = 1.8  # global size H of the reference case
 JUNCTION_NEAR = 0.06  # plate-edge-junction's default 'near' (x the cylinder radius): h = 1.5 at H = 1.8
 OFFSETS = {"junction-centre": 0.0, "junction-edge": 60.0}  # cylinder axis x from the plate centre
-TIERS = {"10k": 4.67, "100k": 2.17, "1M": 1.0}  # scale -> about this many tetrahedra (fuzzymesh)
+TIERS = {"10k": 4.67, "100k": 2.17, "1M": 1.0, "10M": 0.531}  # scale -> about this many tetrahedra (fuzzymesh)
+TIER_CASES = {"10M": ("junction-edge",)}  # tiers run on some cases only (each mesher takes minutes at 10M)
 
 
 def junction_parameters(case: str) -> dict:
