@@ -33,6 +33,7 @@ from .improve import (
     collapse_bad_nodes,
     fill_flat_caps,
     gmsh_optimize,
+    mend_below_target,
     min_dihedrals,
     peel_boundary_slivers,
     quality_below,
@@ -134,6 +135,10 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         points, more = relocate(points, tets, slide[0], seed)
         moves += more
         tets, boundary, patch = repair(points, tets, boundary, patch)
+    if quality_below(points, tets, TARGET).any():
+        points, tets, swapped, more = mend_below_target(points, tets, slide[0], seed)
+        repair.swapped += swapped
+        moves += more
     peeled, collapsed = repair.peeled, repair.collapsed
     seconds["improve"] = time.perf_counter() - start
 
