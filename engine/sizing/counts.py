@@ -133,14 +133,13 @@ def check_element_limit(sizing, max_elements: float | None = None, order: int = 
     or, when that is None, more than MAX_ELEMENTS or more memory at the peak of a run writing elements of
     ``order`` than this machine has (:meth:`ExpectedCounts.peak_bytes`)."""
     expected = sizing.expected_counts
-    tets = expected.tets
+    tets, peak, memory = expected.tets, expected.peak_bytes(order), physical_memory()
     limit = MAX_ELEMENTS if max_elements is None else max_elements
     if not math.isfinite(tets) or tets > limit:
         over = f"limit {limit:.3g}"
-    elif max_elements is None and expected.peak_bytes(order) > physical_memory():
+    elif max_elements is None and peak > memory:
         over = (
-            f"and about {expected.peak_bytes(order) / 2**30:.3g} GiB of memory at the run's peak: this machine has "
-            f"{physical_memory() / 2**30:.1f} GiB"
+            f"and about {peak / 2**30:.3g} GiB of memory at the run's peak: this machine has {memory / 2**30:.1f} GiB"
         )
     else:
         return tets
