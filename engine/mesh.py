@@ -14,9 +14,22 @@ RANKED_FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # face k 
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Volume of each tet, positive for positively oriented ones."""
-    p = points[tets]
-    return np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+    """(m,) volume of each of ``tets`` (m, 4), positive for positively oriented ones: (b - a) . ((c - a) x (d - a))
+    / 6, in numba (numpy's gather of (m, 4, 3) corners and its temporaries took 0.26 s at 1.5M tets); the terms
+    summed in the order numpy's einsum of the cross product summed them, so the values are the same."""
+    return _signed_volumes(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets, dtype=np.int64))
+
+
+@numba.njit(parallel=True, cache=True)
+def _signed_volumes(points, tets):
+    out = np.empty(len(tets))
+    for t in numba.prange(len(tets)):
+        a, b, c, d = points[tets[t, 0]], points[tets[t, 1]], points[tets[t, 2]], points[tets[t, 3]]
+        ux, uy, uz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        vx, vy, vz = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+        wx, wy, wz = d[0] - a[0], d[1] - a[1], d[2] - a[2]
+        out[t] = (ux * (vy * wz - vz * wy) + uz * (vx * wy - vy * wx) + uy * (vz * wx - vx * wz)) / 6.0
+    return out
 
 
 def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

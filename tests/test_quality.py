@@ -43,6 +43,21 @@ def test_sliver_and_orientation():
     assert summary["below"]["min_dihedral_5"] == 1 and summary["below"]["radius_ratio_0.1"] == 1
 
 
+def test_signed_volumes_are_the_triple_product_over_six():
+    """engine.mesh.signed_volumes (a numba kernel) against numpy's (b - a) . ((c - a) x (d - a)) / 6 on random tets
+    (to rounding: the kernel sums the terms in the order einsum does here, but einsum's order is its own), and
+    the sign."""
+    from engine.mesh import signed_volumes
+
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(300, 3))
+    tets = rng.integers(0, len(points), size=(5000, 4))
+    p = points[tets]
+    expected = np.einsum("ij,ij->i", p[:, 1] - p[:, 0], np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 0])) / 6.0
+    np.testing.assert_allclose(signed_volumes(points, tets), expected, rtol=0, atol=1e-14)
+    assert signed_volumes(REGULAR, np.array([[0, 2, 1, 3], [2, 0, 1, 3]])) == pytest.approx([8 / 3, -8 / 3])
+
+
 def test_scale_and_rotation_invariance():
     rng = np.random.default_rng(0)
     points = rng.normal(size=(4, 3))

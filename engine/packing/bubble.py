@@ -286,7 +286,7 @@ def _relax(state: LevelState) -> int:
                 _, frame = constraint.frame(state.x, state.entity)
 
             def acceleration(x, v):
-                f = STIFFNESS * forces(np.concatenate([x, state.frozen]), h, neighbours, n)
+                f = STIFFNESS * forces(x, state.frozen, h, neighbours)
                 return (constraint.tangential(f, frame) - damping * v) / MASS
 
             x0, v0 = state.x, state.v

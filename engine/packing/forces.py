@@ -33,10 +33,13 @@ def separation(x, i, j):
 
 
 @numba.njit(parallel=True, cache=True)
-def forces(x, h, neighbours, movable):
-    """Net force on the first ``movable`` bubbles from their listed neighbours (-1 entries are empty)."""
-    out = np.zeros((movable, 3))
-    for i in numba.prange(movable):
+def forces(x, frozen, h, neighbours):
+    """Net force on the bubbles ``x`` (n, 3) from their listed neighbours (n, k): an index j < n is ``x[j]``, one
+    at or beyond n is ``frozen[j - n]`` (the lower levels' bubbles, kept apart so that no step copies them);
+    ``h`` holds the diameters of both in that order; -1 entries are empty."""
+    n = len(x)
+    out = np.zeros((n, 3))
+    for i in numba.prange(n):
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -44,7 +47,11 @@ def forces(x, h, neighbours, movable):
             j = neighbours[i, k]
             if j < 0:
                 continue
-            dx, dy, dz, length = separation(x, i, j)
+            other = x[j] if j < n else frozen[j - n]
+            dx = x[i, 0] - other[0]
+            dy = x[i, 1] - other[1]
+            dz = x[i, 2] - other[2]
+            length = np.sqrt(dx * dx + dy * dy + dz * dz)
             r0 = 0.5 * (h[i] + h[j])
             w = length / r0
             if w < CUTOFF and length > 0.0:
