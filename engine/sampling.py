@@ -1,5 +1,6 @@
-"""Point-set thinning shared by the packers: a maximal conflict-free subset, chosen greedily by seeded random
-priority, holding each conflict once as two int32 (not every conflict's distances and both directions).
+"""Point sets shared by the packers: their k-d trees (:func:`point_tree`), and thinning, a maximal conflict-free
+subset chosen greedily by seeded random priority, holding each conflict once as two int32 (not every conflict's
+distances and both directions).
 
 Two points conflict when they are closer than the mean of their exclusion radii. :func:`thin` keeps the
 ``fixed`` points, then every other point in descending random priority unless it conflicts with one already
@@ -16,6 +17,13 @@ from scipy.spatial import cKDTree
 from ._numba import numba
 
 CHUNK = 1 << 15  # points whose conflicts are searched at once
+
+
+def point_tree(points: np.ndarray) -> cKDTree:
+    """A k-d tree of ``points`` (n, 3) split at sliding midpoints instead of medians (``balanced_tree=False``):
+    built in half the time (275k bubbles: 0.10 -> 0.05 s), queried as fast on a packing's near-uniform points,
+    with the same answers. The packer builds one per population round, mostly for a few queries."""
+    return cKDTree(points, balanced_tree=False)
 
 
 def thin(
@@ -45,12 +53,12 @@ def _earlier_conflicts(points: np.ndarray, radius: np.ndarray, rank: np.ndarray)
         return np.zeros(0, np.int32), np.zeros(0, np.int32)
     _, bucket = np.unique(np.floor(np.log2(radius / radius.min())).astype(int), return_inverse=True)
     groups = [np.flatnonzero(bucket == b) for b in range(bucket.max() + 1)]
-    trees = [cKDTree(points[g]) for g in groups]
+    trees = [point_tree(points[g]) for g in groups]
     reach = [float(radius[g].max()) for g in groups]
     found_i, found_j = [], []
     for u, tree in enumerate(trees):
         for block in np.array_split(groups[u][tree.indices], -(-len(tree.indices) // CHUNK)):
-            block_tree = cKDTree(points[block])
+            block_tree = point_tree(points[block])
             for v, others in enumerate(groups):
                 found = block_tree.sparse_distance_matrix(trees[v], 0.5 * (reach[u] + reach[v]), output_type="ndarray")
                 i, j = block[found["i"]], others[found["j"]]

@@ -31,11 +31,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import sparse
-from scipy.spatial import cKDTree
 
 from ..errors import KnowledgeError
 from ..features import leaving_angles
 from ..progress import progress
+from ..sampling import point_tree
 from ..sizing import NODES_PER_H3
 from . import CURVE, EVENT, LEVELS, PATCH, VOLUME, Packing, register_packer
 from .constraints import CurveConstraint, PatchConstraint, VolumeConstraint
@@ -484,12 +484,12 @@ def _insertion_spots(state: LevelState, everything, h, neighbours, sources):
     ok = np.ones(len(spots), bool)
     if state.level == VOLUME:
         ok &= geometry.contains(spots)
-    gap, _ = cKDTree(everything).query(spots)
+    gap, _ = point_tree(everything).query(spots)
     ok &= gap > 0.5 * h[sources]
     # two new bubbles may not crowd each other either: keep the first of each close group
     spots, sources = spots[ok], sources[ok]
     if len(spots) > 1:
-        pairs = cKDTree(spots).query_pairs(0.5 * float(h[sources].min()), output_type="ndarray")
+        pairs = point_tree(spots).query_pairs(0.5 * float(h[sources].min()), output_type="ndarray")
         drop = np.zeros(len(spots), bool)
         drop[np.maximum(pairs[:, 0], pairs[:, 1])] = True
         spots, sources = spots[~drop], sources[~drop]
@@ -520,7 +520,7 @@ def _statistics(packing: Packing, sizing, run: PackingRun) -> dict:
 def nearest_over_r0(points: np.ndarray, h: np.ndarray) -> dict:
     """Distance to the nearest other bubble over the stable distance r0 = (h_i + h_j) / 2: median,
     share within [0.85, 1.15], 1st and 99th percentiles."""
-    distance, index = cKDTree(points).query(points, k=2, workers=-1)
+    distance, index = point_tree(points).query(points, k=2, workers=-1)
     ratio = distance[:, 1] / (0.5 * (h + h[index[:, 1]]))
     return {
         "median": float(np.median(ratio)),

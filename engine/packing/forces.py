@@ -11,9 +11,9 @@ scaled by r0 so that bubbles of every size move at the same relative pace
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .._numba import numba
+from ..sampling import point_tree
 
 CUTOFF = 1.5  # w beyond which the force vanishes
 
@@ -159,7 +159,7 @@ def update_neighbours(
     fresh = movable - survivors
     if fresh:
         kk = min(k, len(everything) - 1, rows.shape[1])
-        _, idx = cKDTree(everything).query(everything[survivors:movable], k=kk + 1, workers=-1)
+        _, idx = point_tree(everything).query(everything[survivors:movable], k=kk + 1, workers=-1)
         idx = idx.astype(np.int64)
         own = idx == np.arange(survivors, movable)[:, None]
         keep_cols = ~own
@@ -189,7 +189,7 @@ def neighbour_lists(x: np.ndarray, movable: int, k: int) -> np.ndarray:
     k = min(k, len(x) - 1)
     if movable == 0 or k <= 0:
         return np.full((movable, 0), -1, dtype=np.int64)
-    _, idx = cKDTree(x).query(x[:movable], k=k + 1, workers=-1)
+    _, idx = point_tree(x).query(x[:movable], k=k + 1, workers=-1)
     idx = idx.astype(np.int64)
     own = idx == np.arange(movable)[:, None]
     # drop each row's own index (usually the first column; duplicates may swap places)
