@@ -10,7 +10,6 @@ import numpy as np
 from ._numba import numba
 
 FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])  # face k is opposite vertex k, outward
-RANKED_FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])  # face k opposite vertex k, ascending
 
 
 def signed_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
@@ -35,40 +34,66 @@ def _signed_volumes(points, tets):
 def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner (t,), side (t,)) of the faces of ``tets`` (m, 4) used by one tetrahedron only, in tet order:
     they are ``tets[owner, FACES[side]]``, outward for positively oriented tets. Each tet's nodes are ranked
-    once, so its faces come out ascending, and :func:`_once` finds the faces that occur once (1.85M random
-    Delaunay tets: 0.60 s, where sorting every face's nodes and then one int64 key per face took 1.8-2.6 s)."""
-    rank = np.argsort(tets, axis=1)
-    ranked = np.take_along_axis(tets, rank, axis=1).astype(np.int64)
-    faces = ranked[:, RANKED_FACES].reshape(-1, 3)  # face k of a ranked tet: opposite its k-th smallest node
-    once = _once(faces, int(tets.max(initial=0)) + 1)
+    once, so its faces come out ascending, and :func:`_once` finds the faces that occur once, grouped by their
+    smallest node (1.5M tets: 0.49 s with numpy's row argsort, gathered face array and a serial pass; 0.07 s)."""
+    tets = np.ascontiguousarray(tets, dtype=np.int64)
+    rank = _ranks(tets)
+    once = np.flatnonzero(_once(tets, rank, int(tets.max(initial=0)) + 1))  # face ids: 4 x tet + ranked k
     owner = once // 4
     side = rank[owner, once % 4]  # the ranked vertex a face is opposite, back in the tet's own order
     by_tet = np.argsort(owner * 4 + side)
     return owner[by_tet], side[by_tet]
 
 
-@numba.njit(cache=True)
-def _once(faces, n):
-    """Rows of ``faces`` (k, 3), each ascending with nodes in [0, n), that no other row repeats: a counting
-    sort by the first node, then each group's (second, third) keys sorted (a few dozen per group)."""
+@numba.njit(parallel=True, cache=True)
+def _ranks(tets):
+    """(m, 4) the positions of each tet's nodes in ascending order of node (ties in position order)."""
+    rank = np.empty(tets.shape, np.int64)
+    for t in numba.prange(len(tets)):
+        for k in range(4):
+            rank[t, k] = k
+        for k in range(1, 4):
+            j = k
+            while j > 0 and tets[t, rank[t, j - 1]] > tets[t, rank[t, j]]:
+                rank[t, j - 1], rank[t, j] = rank[t, j], rank[t, j - 1]
+                j -= 1
+    return rank
+
+
+@numba.njit(cache=True, inline="always")
+def _face_nodes(tets, rank, face):
+    """The ascending nodes of face ``face`` = 4 t + k: tet t's face opposite its k-th smallest node."""
+    t, k = face // 4, face % 4
+    a = rank[t, 1] if k == 0 else rank[t, 0]
+    b = rank[t, 2] if k <= 1 else rank[t, 1]
+    c = rank[t, 3] if k <= 2 else rank[t, 2]
+    return tets[t, a], tets[t, b], tets[t, c]
+
+
+@numba.njit(parallel=True, cache=True)
+def _once(tets, rank, n):
+    """(4 m,) whether each face of ``tets`` (ranked by ``rank``) occurs once: the faces counting-sorted by their
+    smallest node (of [0, n)), then each group's (second, third) keys sorted (a few dozen per group), the
+    groups in parallel."""
+    faces = 4 * len(tets)
     start = np.zeros(n + 1, np.int64)
-    for i in range(len(faces)):
-        start[faces[i, 0] + 1] += 1
+    for f in range(faces):
+        start[_face_nodes(tets, rank, f)[0] + 1] += 1
     for a in range(n):
         start[a + 1] += start[a]
     fill = start[:-1].copy()
-    by_first = np.empty(len(faces), np.int64)
-    for i in range(len(faces)):
-        by_first[fill[faces[i, 0]]] = i
-        fill[faces[i, 0]] += 1
-    out = np.empty(len(faces), np.int64)
-    m = 0
-    for a in range(n):
+    by_first = np.empty(faces, np.int64)
+    for f in range(faces):
+        a = _face_nodes(tets, rank, f)[0]
+        by_first[fill[a]] = f
+        fill[a] += 1
+    single = np.zeros(faces, np.bool_)
+    for a in numba.prange(n):
         size = start[a + 1] - start[a]
         keys = np.empty(size, np.int64)
         for j in range(size):
-            i = by_first[start[a] + j]
-            keys[j] = faces[i, 1] * n + faces[i, 2]
+            _, b, c = _face_nodes(tets, rank, by_first[start[a] + j])
+            keys[j] = b * n + c
         order = np.argsort(keys)
         j = 0
         while j < size:
@@ -76,10 +101,9 @@ def _once(faces, n):
             while same < size and keys[order[same]] == keys[order[j]]:
                 same += 1
             if same == j + 1:
-                out[m] = by_first[start[a] + order[j]]
-                m += 1
+                single[by_first[start[a] + order[j]]] = True
             j = same
-    return out[:m]
+    return single
 
 
 @numba.njit(cache=True)
