@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._numba import numba
 from .levels import NODE_LEVELS
 from .mesh import TetMesh
 from .quality import EDGES
@@ -34,15 +35,15 @@ class Audit:
 
 def audit_mesh(mesh: TetMesh, sizing, packing, features, knowledge=None, job_source: str | None = None) -> Audit:
     """The audit of ``mesh`` (see the module doc)."""
-    corners = mesh.points[mesh.tets]  # (m, 4, 3), gathered once
-    centroids = (corners[:, 0] + corners[:, 1] + corners[:, 2] + corners[:, 3]) / 4
+    centroids, h_actual = _centroids_and_mean_edges(
+        np.ascontiguousarray(mesh.points, dtype=np.float64), np.ascontiguousarray(mesh.tets, dtype=np.int64), EDGES
+    )
     evaluation = sizing.evaluate(centroids)
     rows = np.arange(len(mesh.tets))
     winner, runner_up = evaluation.winner, evaluation.runner_up
     zone_offset = np.cumsum([0] + [len(p.zones) for p in sizing.placed])
     placements = list(dict.fromkeys(id(p.placement) for p in sizing.placed))
     placement_of = np.array([placements.index(id(p.placement)) for p in sizing.placed] + [-1])
-    h_actual = sum(np.linalg.norm(corners[:, j] - corners[:, i], axis=1) for i, j in EDGES) / len(EDGES)
     cells = {
         "h_target": evaluation.h,
         "h_actual": h_actual,
@@ -148,6 +149,28 @@ def idle_patterns(legend: dict) -> tuple[list[str], list[str]]:
         if p["origin"] == "job"
     ]
     return warnings, [p["id"] for p in idle if p["origin"] != "job"]
+
+
+@numba.njit(parallel=True, cache=True)
+def _centroids_and_mean_edges(points, tets, edges):
+    """(m, 3) centroid and (m,) mean edge length of each of ``tets`` (m, 4), in one pass (numpy gathered an
+    (m, 4, 3) corner array and six (m, 3) differences: 0.3 s at 1.5M tets). The sums run in the order numpy's
+    ran them, so the values are the same."""
+    m = len(tets)
+    centroids = np.empty((m, 3))
+    mean_edge = np.empty(m)
+    for t in numba.prange(m):
+        for axis in range(3):
+            total = points[tets[t, 0], axis] + points[tets[t, 1], axis]
+            total = total + points[tets[t, 2], axis]
+            centroids[t, axis] = (total + points[tets[t, 3], axis]) / 4
+        total = 0.0
+        for e in range(len(edges)):
+            a, b = points[tets[t, edges[e, 0]]], points[tets[t, edges[e, 1]]]
+            dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+            total += np.sqrt(dx * dx + dy * dy + dz * dz)
+        mean_edge[t] = total / len(edges)
+    return centroids, mean_edge
 
 
 def _node_history(mesh: TetMesh, packing, knowledge):
