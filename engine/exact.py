@@ -32,6 +32,7 @@ import numpy as np
 
 from .fitting import fit_circle_projected
 from .levels import Level
+from .mesh import triangle_edges
 from .quality import tet_quality
 
 EXACT_TOLERANCE = 1e-6  # x the model size: a float32 STL's vertices lie within ~1e-7 of their surface
@@ -355,7 +356,7 @@ def element_size(mesh, points: np.ndarray) -> np.ndarray:
 
     if len(mesh.boundary) == 0:
         return np.full(len(points), np.inf)
-    edges = np.unique(np.sort(mesh.boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    edges = triangle_edges(mesh.boundary)
     length = np.linalg.norm(mesh.points[edges[:, 0]] - mesh.points[edges[:, 1]], axis=1)
     total = np.bincount(edges.ravel(), np.repeat(length, 2), len(mesh.points))
     count = np.bincount(edges.ravel(), minlength=len(mesh.points))

