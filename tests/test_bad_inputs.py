@@ -410,6 +410,39 @@ def test_broken_yaml_syntax(capsys, tmp_path, text, location, fragment):
     assert_refused(capsys, tmp_path, job, "invalid YAML", fragment, "fix the YAML syntax", where=f"{job}:{location}")
 
 
+def test_libyaml_reads_what_the_pure_python_parser_reads():
+    """Every shipped YAML file (knowledge, patterns, examples) parses to the same values, key order and source
+    marks (line, column of every mapping and key) with libyaml's parser as with PyYAML's pure-Python one, which
+    parse_yaml falls back to for its error messages (the broken-YAML tests above go through it)."""
+    import yaml
+
+    from engine.yamlfile import FAST_LOADER, _loader_for
+
+    if FAST_LOADER is None:
+        pytest.skip("PyYAML without libyaml")
+
+    def same(a, b, path):
+        assert type(a) is type(b) and (a == b or a != a), path  # NaN equals NaN here
+        if isinstance(a, dict):
+            assert list(a) == list(b) and (a.line, a.col, a.key_marks) == (b.line, b.col, b.key_marks), path
+            for key in a:
+                same(a[key], b[key], f"{path}/{key}")
+        elif isinstance(a, list):
+            for i, (x, y) in enumerate(zip(a, b)):
+                same(x, y, f"{path}[{i}]")
+
+    root = Path(__file__).resolve().parents[1]
+    files = [f for folder in ("knowledge", "patterns", "examples") for f in sorted((root / folder).rglob("*.yaml"))]
+    assert len(files) > 20
+    for path in files:
+        text = path.read_text()
+        same(
+            yaml.load(text, Loader=_loader_for(str(path))),
+            yaml.load(text, Loader=_loader_for(str(path), base=FAST_LOADER)),
+            path.name,
+        )  # noqa: S506
+
+
 def test_job_file_not_utf8(capsys, tmp_path):
     job = tmp_path / "job.yaml"
     job.write_bytes(b"geometry:\n  shape: cyl\xe9nder\n")
