@@ -40,6 +40,7 @@ counted and left out of their series.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -284,19 +285,26 @@ def recipe_placements(case: Case, scale: float) -> list[dict]:
     return out
 
 
+@functools.cache
+def _scratch() -> Path:
+    """This process's own folder for the scaled sizing files (two studies run side by side wrote one shared
+    /tmp file: one of them read it empty)."""
+    import tempfile
+
+    return Path(tempfile.mkdtemp(prefix="fe_study-"))
+
+
 def scaled_sizing(scale: float, fixed_gradation: bool = False) -> Path:
     """knowledge/sizing.yaml with the gradation limit scaled with the sizes: h(y) <= h(x) + (g - 1)|x - y| holds
     for s h with (g - 1) s, so the recipe series at scale s is exactly s times the recipe's graded field (as the
     Gmsh series is s times its Threshold field); ``fixed_gradation`` keeps the shipped g at every scale."""
-    import tempfile
-
     import yaml
 
     sizing = _yaml(KNOWLEDGE / "sizing.yaml")
     if not fixed_gradation:
         sizing["gradation"] = min(3.0, round(1 + (sizing["gradation"] - 1) * scale, 6))
     sizing["always_place"] = []  # the recipe series places them itself, scaled
-    path = Path(tempfile.gettempdir()) / f"fe_study_sizing_{sizing['gradation']:g}.yaml"
+    path = _scratch() / f"sizing_{sizing['gradation']:g}.yaml"
     path.write_text(yaml.safe_dump(sizing))
     return path
 
