@@ -57,16 +57,15 @@ def boundary_topology(tets: np.ndarray, sides: tuple | None = None) -> dict:
     outward boundary faces; ``bad_node`` a node on a defect or -1."""
     import igl
 
-    from .mesh import FACES, single_faces
+    from .mesh import FACES, distinct_pairs, single_faces
 
     owner, side = single_faces(tets) if sides is None else sides
     boundary = tets[owner[:, None], FACES[side]]
-    directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)
-    n = int(directed.max(initial=0)) + 1  # an edge (a, b) as the key a n + b: 1-D uniques, in (a, b) order
-    undirected, edge_counts = np.unique(directed.min(axis=1) * n + directed.max(axis=1), return_counts=True)
-    open_edges = np.column_stack(np.divmod(undirected[edge_counts != 2], n))
-    same_way, way_counts = np.unique(directed[:, 0] * n + directed[:, 1], return_counts=True)
-    misoriented = np.column_stack(np.divmod(same_way[way_counts > 1], n))
+    directed = boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    undirected, edge_counts = distinct_pairs(np.sort(directed, axis=1), counts=True)
+    open_edges = undirected[edge_counts != 2]
+    same_way, way_counts = distinct_pairs(directed, counts=True)
+    misoriented = same_way[way_counts > 1]
     used = np.unique(boundary)
     pinched = used[~igl.is_vertex_manifold(np.ascontiguousarray(boundary, dtype=np.int64))[used]]
     bad = next((d[:1].ravel() for d in (open_edges, misoriented, pinched) if len(d)), [])

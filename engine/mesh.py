@@ -31,12 +31,19 @@ def _signed_volumes(points, tets):
     return out
 
 
+def distinct_pairs(pairs: np.ndarray, counts: bool = False):
+    """(k, 2) the distinct rows of the integer pairs (m, 2) in ascending (a, b) order: np.unique(pairs, axis=0),
+    through one int64 key a n + b per row (1-D: 3-4x faster); with ``counts``, also (k,) how often each occurs."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    n = int(pairs.max(initial=0)) + 1
+    keys, seen = np.unique(pairs[:, 0] * n + pairs[:, 1], return_counts=True)
+    distinct = np.column_stack(np.divmod(keys, n))
+    return (distinct, seen) if counts else distinct
+
+
 def triangle_edges(triangles: np.ndarray) -> np.ndarray:
-    """(k, 2) the distinct edges of ``triangles`` (t, 3), each ascending, in ascending (a, b) order: what
-    np.unique of the sorted rows gives, through one int64 key a n + b per edge (1-D: 3-4x faster)."""
-    directed = np.asarray(triangles, dtype=np.int64)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    n = int(directed.max(initial=0)) + 1
-    return np.column_stack(np.divmod(np.unique(directed.min(axis=1) * n + directed.max(axis=1)), n))
+    """(k, 2) the distinct edges of ``triangles`` (t, 3), each ascending, in ascending (a, b) order."""
+    return distinct_pairs(np.sort(np.asarray(triangles)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1))
 
 
 def single_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

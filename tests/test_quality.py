@@ -58,6 +58,17 @@ def test_signed_volumes_are_the_triple_product_over_six():
     assert signed_volumes(REGULAR, np.array([[0, 2, 1, 3], [2, 0, 1, 3]])) == pytest.approx([8 / 3, -8 / 3])
 
 
+def test_distinct_pairs_are_numpys_unique_rows():
+    """engine.mesh.distinct_pairs (one int64 key per pair) against np.unique(axis=0), rows and counts."""
+    from engine.mesh import distinct_pairs
+
+    pairs = np.random.default_rng(2).integers(0, 40, size=(3000, 2))
+    rows, counts = np.unique(pairs, axis=0, return_counts=True)
+    distinct, seen = distinct_pairs(pairs, counts=True)
+    assert np.array_equal(distinct, rows) and np.array_equal(seen, counts)
+    assert np.array_equal(distinct_pairs(pairs), rows)
+
+
 def test_scale_and_rotation_invariance():
     rng = np.random.default_rng(0)
     points = rng.normal(size=(4, 3))

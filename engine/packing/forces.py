@@ -24,11 +24,11 @@ def shimada(w):
 
 
 @numba.njit(cache=True, inline="always")
-def separation(x, i, j):
-    """Vector from bubble j to bubble i, and its length."""
-    dx = x[i, 0] - x[j, 0]
-    dy = x[i, 1] - x[j, 1]
-    dz = x[i, 2] - x[j, 2]
+def separation(a, i, b, j):
+    """Vector from point ``b[j]`` to point ``a[i]`` (rows of (n, 3) arrays), and its length."""
+    dx = a[i, 0] - b[j, 0]
+    dy = a[i, 1] - b[j, 1]
+    dz = a[i, 2] - b[j, 2]
     return dx, dy, dz, np.sqrt(dx * dx + dy * dy + dz * dz)
 
 
@@ -47,11 +47,7 @@ def forces(x, frozen, h, neighbours):
             j = neighbours[i, k]
             if j < 0:
                 continue
-            other = x[j] if j < n else frozen[j - n]
-            dx = x[i, 0] - other[0]
-            dy = x[i, 1] - other[1]
-            dz = x[i, 2] - other[2]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
+            dx, dy, dz, length = separation(x, i, x, j) if j < n else separation(x, i, frozen, j - n)
             r0 = 0.5 * (h[i] + h[j])
             w = length / r0
             if w < CUTOFF and length > 0.0:
@@ -77,7 +73,7 @@ def proximity(x, h, neighbours, movable, count_radius):
             j = neighbours[i, k]
             if j < 0:
                 continue
-            length = separation(x, i, j)[3]
+            length = separation(x, i, x, j)[3]
             r0 = 0.5 * (h[i] + h[j])
             if length < count_radius * r0:
                 c += 1
@@ -106,7 +102,7 @@ def deletions(x, h, neighbours, movable, candidate, priority):
                 continue
             if j >= movable or not candidate[j] or priority[j] <= priority[i]:
                 continue
-            if separation(x, i, j)[3] < 0.5 * (h[i] + h[j]):
+            if separation(x, i, x, j)[3] < 0.5 * (h[i] + h[j]):
                 keep_me = True
                 break
         out[i] = not keep_me
