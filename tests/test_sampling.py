@@ -1,4 +1,5 @@
-"""engine.sampling.thin: the greedy maximal independent set by seeded random priority, found in blocks."""
+"""engine.sampling.thin: the greedy maximal independent set by seeded random priority, its conflicts found on a
+grid."""
 
 import numpy as np
 import pytest
@@ -32,8 +33,18 @@ def test_thin_is_the_greedy_set_by_priority(cloud, monkeypatch):
     priority = np.random.default_rng(11).random(len(points))
     expected = greedy_reference(points, radius, priority, fixed)
     assert np.array_equal(sampling.thin(points, radius, np.random.default_rng(11), fixed), expected)
-    monkeypatch.setattr(sampling, "CHUNK", 37)  # many blocks: the same set
+    monkeypatch.setattr(sampling, "MAX_COLUMNS_PER_POINT", 0.01)  # cells far wider than the radii: the same set
     assert np.array_equal(sampling.thin(points, radius, np.random.default_rng(11), fixed), expected)
+
+
+def test_conflicts_are_every_pair_once_from_its_later_point(cloud):
+    points, radius, _ = cloud
+    rank = np.random.default_rng(5).permutation(len(points))
+    later, earlier = sampling._earlier_conflicts(points, radius, rank)
+    distance = np.linalg.norm(points[:, None] - points[None], axis=2)
+    i, j = np.nonzero((distance < 0.5 * (radius[:, None] + radius[None])) & (rank[None] < rank[:, None]))
+    assert len(later) == len(i) > 100
+    assert np.array_equal(np.sort(later.astype(np.int64) * len(points) + earlier), np.sort(i * len(points) + j))
 
 
 def test_thin_keeps_a_maximal_conflict_free_set_with_the_fixed_points(cloud):
