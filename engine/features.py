@@ -280,7 +280,7 @@ def detect_features(
     cylinders = faceted_cylinders(mesh, patches, face_patch, sharp)
     return Features(
         corners=corners,
-        curves=[c if c.sharp else _unzigzagged(c) for c in curves],
+        curves=[c if c.sharp else _unzigzagged(c, geometry) for c in curves],
         patches=_with_tori(mesh, cylinders) if tori else cylinders,
         face_patch=face_patch,
         feature_angle=feature_angle,
@@ -368,12 +368,13 @@ def faceted_cylinders(mesh, patches: list, face_patch: np.ndarray, sharp: np.nda
     return out
 
 
-def _unzigzagged(curve: Curve) -> Curve:
+def _unzigzagged(curve: Curve, geometry) -> Curve:
     """A smooth cut without the teeth of its zigzag along the input's edges: a point whose neighbours lie
     nearer to each other than to it is dropped (every other one of a run), until none is left. A cut
     across a CAD tessellation's long facets runs along their diagonals, several times longer than the cut;
     bubbles spaced along that zigzag would crowd. The points left are input vertices on one side of the
-    facets; ``vertices`` still name all the input edges the cut follows (the patches' sides)."""
+    facets, and the surface points :func:`_chords_on_surface` adds where a chord between them cuts through a
+    curved face; ``vertices`` still name all the input edges the cut follows (the patches' sides)."""
     points = curve.points
     for _ in range(len(points)):
         behind, ahead = np.roll(points, 1, axis=0), np.roll(points, -1, axis=0)
@@ -385,9 +386,33 @@ def _unzigzagged(curve: Curve) -> Curve:
             break
         run_start = np.maximum.accumulate(np.where(spike & ~np.roll(spike, 1), np.arange(len(spike)), 0))
         points = points[~(spike & ((np.arange(len(spike)) - run_start) % 2 == 0))]
-    return replace(curve, points=points) if len(points) < len(curve.points) else curve
+    if len(points) == len(curve.points):
+        return curve
+    return replace(curve, points=_chords_on_surface(points, curve.closed, geometry))
 
 
+def _chords_on_surface(points: np.ndarray, closed: bool, geometry) -> np.ndarray:
+    """``points`` (n, 3) of a polyline with the closest surface point to the middle of every chord that
+    strays from the surface there by more than CHORD_ON_SURFACE x the length of the chord it came from put
+    between its ends, in rounds (each halves the chords still off), at most CHORD_ROUNDS (a chord across one
+    of the facets' creases strays by a share of its length that halving does not change). A cut across a
+    cast housing's 4 mm base fillet, unzigzagged, ran 0.29 mm inside it on 3 mm chords, and its nodes put the
+    mesh 0.28 h off the input; the corpus torus's cuts ran 0.07 inside it."""
+    start, end = (points, np.roll(points, -1, axis=0)) if closed else (points[:-1], points[1:])
+    allowed = CHORD_ON_SURFACE * np.linalg.norm(end - start, axis=1)  # per chord
+    for _ in range(CHORD_ROUNDS):
+        start, end = (points, np.roll(points, -1, axis=0)) if closed else (points[:-1], points[1:])
+        closest, off, _ = geometry.closest_point(0.5 * (start + end))
+        far = np.flatnonzero(off > allowed)
+        if not len(far):
+            break
+        points = np.insert(points, far + 1, closest[far], axis=0)
+        allowed = np.insert(allowed, far + 1, allowed[far])
+    return points
+
+
+CHORD_ON_SURFACE = 0.01  # x its length: how far a smooth cut's chord (and its halves) may stray from the surface
+CHORD_ROUNDS = 6  # halvings of the chords that stray further
 CREASE = 2.0  # a sharp edge inside one patch below this x the feature angle is a faceting crease
 CHART_CONE = 90.0  # degrees: a curved piece is one chart if its face normals stay this close to their mean ...
 MAX_STRETCH = 1.6  # ... and its conformal map stretches lengths by at most this ratio (a sphere's octant: 1.15), ...
@@ -757,11 +782,11 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
         local = np.full(len(mesh.faces), -1)
         local[piece] = np.arange(len(piece))
         inner = (local[pairs[:, 0]] >= 0) & (local[pairs[:, 1]] >= 0)
+        one, other = np.zeros((2, len(piece)), bool)  # the faces the cut keeps apart
         if folds is not None:  # it flattens, but its border folds onto itself: the fold's two sides apart
-            source, sink = np.zeros(len(piece), bool), np.zeros(len(piece), bool)
-            source[folds[0]], sink[folds[1]] = True, True
-            source, sink = source & ~sink, sink & ~source
-        else:
+            one[folds[0]], other[folds[1]] = True, True
+            one, other = one & ~other, other & ~one
+        if not (one.any() and other.any()):  # no fold, or one whose sides are the same faces (an ear at a cusp)
             spread = normals[piece] - normals[piece].mean(axis=0)
             along = normals[piece] @ np.linalg.svd(spread, full_matrices=False)[2][0]
             near = sparse.coo_matrix((np.ones(inner.sum()), tuple(local[pairs[inner]].T)), shape=(len(piece),) * 2)
@@ -769,8 +794,8 @@ def _split_by_normals(mesh, faces: np.ndarray, pairs: np.ndarray, source: str) -
             for _ in range(SMOOTHING):  # faceting noise (a quad's two triangles) must not interleave the seeds
                 along = (along + near @ along) / (1.0 + np.asarray(near.sum(axis=1)).ravel())
             along = (along - along.min()) / max(np.ptp(along), 1e-300)
-            source, sink = along > 1 - SEED_BAND, along < SEED_BAND
-        side = _min_cut(len(piece), local[pairs[inner]], length[inner], source, sink)
+            one, other = along > 1 - SEED_BAND, along < SEED_BAND
+        side = _min_cut(len(piece), local[pairs[inner]], length[inner], one, other)
         side = _without_islands(side, local[pairs[inner]])
         for half in (piece[side], piece[~side]):
             labels = _components(len(mesh.faces), pairs[inner][np.isin(pairs[inner], half).all(axis=1)])

@@ -266,3 +266,44 @@ def test_a_keyed_bore_is_unrolled_open_and_a_hole_wall_round(tmp_path):
     _, geometry, features = solid_features(tmp_path / "block.stl")
     (wall,) = [p for p in features.patches if p.cylinder is not None]
     assert PatchChart(wall, geometry).turn == pytest.approx(2 * np.pi * 4.0, rel=1e-3)
+
+
+def test_a_smooth_cut_s_chords_across_a_curved_face_are_put_on_it():
+    """A cut unzigzagged across a coarse fillet's facets runs on chords through the solid (a cast housing's
+    4 mm base fillet: 0.29 mm inside, and the mesh 0.28 h off the input): points of the surface go between
+    the ends of every chord that strays from it by more than CHORD_ON_SURFACE x the length of the chord it came
+    from (the first one's here)."""
+    import trimesh
+
+    from engine.features import CHORD_ON_SURFACE, _chords_on_surface
+    from engine.geometry import validate_surface
+
+    bar = trimesh.creation.cylinder(radius=4.0, height=10.0, sections=8)
+    geometry = validate_surface(bar.vertices, bar.faces, "bar.stl")
+    ends = np.array([[4.0, 0.0, -5.0], [0.0, 4.0, 5.0], [-4.0, 0.0, 5.0]])  # through the bar, then on its end
+    off = geometry.closest_point(0.5 * (ends[1:] + ends[:-1]))[1]
+    assert off[0] > 0.5 and off[1] < 1e-9
+
+    points = _chords_on_surface(ends, False, geometry)
+    middles = 0.5 * (points[1:] + points[:-1])
+    assert len(points) > 3 and np.array_equal(points[-2:], ends[-2:]) and np.array_equal(points[0], ends[0])
+    assert (geometry.closest_point(points)[1] < 1e-9).all()
+    assert (geometry.closest_point(middles[:-1])[1] <= CHORD_ON_SURFACE * np.linalg.norm(ends[1] - ends[0])).all()
+    square = np.array([[5.0, 5.0, 5.0], [5.0, -5.0, 5.0], [-5.0, -5.0, 5.0]])  # on the flat end: kept as it is
+    assert np.array_equal(_chords_on_surface(square * [0.5, 0.5, 1.0], False, geometry), square * [0.5, 0.5, 1.0])
+
+
+def test_a_surface_that_cannot_be_cut_into_charts_is_refused_in_one_line_naming_the_file(monkeypatch):
+    """The refusal after MAX_SPLITS halvings names the input (the halving's seeds once shadowed the name, and the
+    refusal became an internal error)."""
+    import trimesh
+
+    from engine import features
+    from engine.errors import GeometryError
+    from engine.geometry import validate_surface
+
+    ring = trimesh.creation.torus(major_radius=10.0, minor_radius=3.0)
+    geometry = validate_surface(ring.vertices, ring.faces, "ring.stl")
+    monkeypatch.setattr(features, "MAX_SPLITS", 1)
+    with pytest.raises(GeometryError, match=r"^ring\.stl: a smooth surface around .* cannot be cut into pieces"):
+        detect_features(geometry, tori=False)
