@@ -474,3 +474,19 @@ def test_chain_edges_a_triangulation_keeps_missing_are_refused_with_their_place(
     message = str(error.value)
     assert "feature-curve edges still missing from the surface triangulation, around (" in message
     assert "(centroid " in message and "curve-" in message
+
+
+def test_a_chart_without_triangles_has_no_stray_points():
+    """A patch whose nodes make no triangle in its chart (three in a row, on a cast housing's corner) has no
+    input point to add: libigl's distance query on no triangles read past its arrays and crashed the process."""
+    from types import SimpleNamespace
+
+    from engine.meshing.surface import _stray_points
+
+    chart = SimpleNamespace(
+        probe_uv=np.array([[0.5, 0.1], [1.5, -0.1]]), probe_xyz=np.zeros((2, 3)), flat_tolerance=1e-3
+    )
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    none = np.zeros((0, 3), np.int64)
+    point, badness, h = _stray_points(chart, uv, none, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    assert point.shape == (0, 2) and len(badness) == len(h) == 0

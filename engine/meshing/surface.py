@@ -473,6 +473,8 @@ def _stray_points(chart, uv, tri, corner, normal, h):
     input edges) lying more than DEVIATION x h off the plane of the triangle of ``tri`` (over ``uv``) whose image
     holds them; ``corner`` and ``normal`` (t, 3): a lifted corner and the unit normal of each triangle, ``h``
     (t,) its size."""
+    if not len(tri) or not len(chart.probe_uv):  # libigl's distance query reads past empty arrays (a segfault)
+        return np.zeros((0, 2)), np.zeros(0), np.zeros(0)
     flat = np.ascontiguousarray(np.column_stack([uv, np.zeros(len(uv))]))
     faces = np.ascontiguousarray(tri, dtype=np.int64)
     query = np.ascontiguousarray(np.column_stack([chart.probe_uv, np.zeros(len(chart.probe_uv))]))
