@@ -24,8 +24,8 @@ def write_size_grid(sizing, path) -> None:
     index fastest: value (i, j, k) at origin + spacing * (i, j, k), which is our grid's
     C order. Gmsh interpolates it trilinearly, exactly as ``SizingField.__call__``.
     """
-    if sizing.min_size is not None or sizing.max_size is not None:
-        raise ValueError("the Structured export reproduces h(x) only without min_size / max_size")
+    if sizing.min_size is not None or sizing.max_size is not None or sizing.graded.finer:
+        raise ValueError("the Structured export reproduces h(x) only without min_size / max_size and finer grids")
     grid = np.ascontiguousarray(sizing.grid, dtype="<f8")
     with open(path, "wb") as file:
         file.write(np.asarray(sizing.origin, dtype="<f8").tobytes())
