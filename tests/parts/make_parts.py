@@ -357,6 +357,40 @@ def round_into_wall() -> int:
     return _fillet(block, _curves(lambda b: _at_z(14)(b) and abs(b[1]) < EPS and abs(b[4]) < EPS), 2)
 
 
+def _rectangle_wire(width: float, depth: float, z: float) -> int:
+    """A closed wire round the rectangle ``width`` x ``depth`` centred on the z axis at height ``z``."""
+    p = [occ.addPoint(sx * width / 2, sy * depth / 2, z) for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    return occ.addWire([occ.addLine(p[i], p[(i + 1) % 4]) for i in range(4)])
+
+
+def drafted_housing() -> int:
+    """A cast housing: a flange 140 x 100 x 8 carrying a body with 4 deg draft (100 x 70 at its base, 40 high),
+    its vertical edges rounded r 6 and its base r 4, a drafted cavity from the top and four bolt holes. Where
+    the drafted rounds meet the base round a chart's border folds onto itself within one triangle, and a cut
+    across the base round's long facets ran inside it (both refused the coarse STL)."""
+    draft = math.tan(math.radians(4))
+    body = _one(
+        occ.addThruSections(
+            [_rectangle_wire(100, 70, 8), _rectangle_wire(100 - 80 * draft, 70 - 80 * draft, 48)],
+            makeSolid=True,
+            makeRuled=True,
+        )
+    )
+    occ.synchronize()
+    body = _fillet(body, _curves(lambda b: b[5] - b[2] > 30 and b[3] - b[0] < 4 and b[4] - b[1] < 4), 6)
+    part = _fuse(occ.addBox(-70, -50, 0, 140, 100, 8), body)
+    base = _curves(lambda b: _at_z(8)(b) and b[3] - b[0] < 101 and b[4] - b[1] < 71 and max(abs(b[0]), abs(b[3])) < 51)
+    part = _fillet(part, base, 4)
+    cavity = _one(
+        occ.addThruSections(
+            [_rectangle_wire(80, 50, 20), _rectangle_wire(80 + 60 * draft, 50 + 60 * draft, 50)],
+            makeSolid=True,
+            makeRuled=True,
+        )
+    )
+    return _cut(part, cavity, *[_hole(x, y, -1, 9, 5) for x in (-60, 60) for y in (-40, 40)])
+
+
 PARTS = {
     f.__name__: f
     for f in (
@@ -388,6 +422,7 @@ PARTS = {
         cross_bored_block,
         thin_chamfer_plate,
         round_into_wall,
+        drafted_housing,
     )
 }
 
