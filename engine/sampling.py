@@ -64,24 +64,27 @@ def _earlier_conflicts(points: np.ndarray, radius: np.ndarray, rank: np.ndarray)
         order = np.lexsort((layers, columns))
         sorted_members = members[order]
         column_start = np.concatenate(([0], np.cumsum(np.bincount(columns, minlength=grid.columns))))
+        gathered = _gathered(points, radius, rank, sorted_members)
         for u in range(v + 1):
             if u == v:
-                queries = sorted_members
+                queries = gathered
             else:
                 query_columns, query_layers = grid.cells(points[groups[u]])
-                queries = groups[u][np.lexsort((query_layers, query_columns))]  # neighbours query neighbours
-            search = (
-                points[queries], radius[queries], rank[queries], queries.astype(np.int32),
-                points[sorted_members], radius[sorted_members], rank[sorted_members], sorted_members.astype(np.int32),
-                layers[order], column_start, grid.origin, grid.cell, grid.shape, u == v,
-            )  # fmt: skip
-            counts = np.zeros(len(queries) + 1, np.int64)
+                order_u = np.lexsort((query_layers, query_columns))  # neighbours query neighbours
+                queries = _gathered(points, radius, rank, groups[u][order_u])
+            search = (*queries, *gathered, layers[order], column_start, grid.origin, grid.cell, grid.shape, u == v)
+            counts = np.zeros(len(queries[0]) + 1, np.int64)
             _conflicts_near(*search, counts[1:], np.zeros(0, np.int32), np.zeros(0, np.int32))
             later, earlier = np.empty((2, counts.sum()), np.int32)
             _conflicts_near(*search, np.cumsum(counts[:-1]), later, earlier)
             found_i.append(later)
             found_j.append(earlier)
     return np.concatenate(found_i), np.concatenate(found_j)
+
+
+def _gathered(points, radius, rank, index) -> tuple:
+    """Positions, radii, ranks and int32 ids of the points ``index``, in that order (contiguous for the kernel)."""
+    return points[index], radius[index], rank[index], index.astype(np.int32)
 
 
 class _Grid(NamedTuple):
