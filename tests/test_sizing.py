@@ -229,22 +229,24 @@ def test_the_grid_interpolation_is_scipys_trilinear_bit_for_bit():
     assert np.array_equal(_trilinear(grid, origin, cell, points), expected)
 
 
+SMALL_HOLE = {
+    "geometry": {
+        "shape": "plate_with_hole",
+        "parameters": {"length": 200, "width": 100, "thickness": 10, "hole_radius": 0.5},
+    },
+    "recipe": "static-stress",
+}
+
+
 def test_a_hole_far_smaller_than_the_grid_cells_gets_a_finer_grid():
     """A hole of radius 0.5 in a 200 x 100 x 10 plate (static-stress: 0.0625 at its wall, cells 0.79 wide): the
     size grows off the wall as the gradation lets it instead of staying at the wall's over a cell or two (2.7M
     of the mesh's 3.0M tets were there), never above the raw size, and Lipschitz with g - 1 across the border of
     the finer grid's box as everywhere."""
-    geometry, sizing = sizing_for(
-        {
-            "geometry": {
-                "shape": "plate_with_hole",
-                "parameters": {"length": 200, "width": 100, "thickness": 10, "hole_radius": 0.5},
-            },
-            "recipe": "static-stress",
-        }
-    )
+    geometry, sizing = sizing_for(SMALL_HOLE)
     assert sizing.h_min == pytest.approx(0.0625, rel=1e-3) and sizing.h_min < 0.25 * sizing.cell
-    ((lo, hi, _),) = sizing.graded.finer
+    ((lo, hi, finer),) = sizing.graded.finer
+    assert finer.cell <= 0.5 * sizing.cell
     assert (lo[:2] < -0.5).all() and (hi[:2] > 0.5).all()
     off_wall = np.array([[0.5 + d, 0.0, 5.0] for d in (1.0, 1.5)])
     assert (sizing(off_wall) > [0.15, 0.22]).all(), "pinned at the wall's size (0.0625) a cell off it"
@@ -258,3 +260,16 @@ def test_a_hole_far_smaller_than_the_grid_cells_gets_a_finer_grid():
     step = rng.normal(size=x.shape)
     y = x + 0.05 * step / np.linalg.norm(step, axis=1, keepdims=True)
     assert (np.abs(sizing(y) - sizing(x)) <= (sizing.gradation - 1) * 0.05 * (1 + 1e-9)).all()
+
+
+def test_no_finer_grid_where_its_share_of_nodes_would_leave_it_as_coarse(monkeypatch):
+    """With too few nodes to share (a plate with 60 small holes: each box's grid nearly as coarse as the
+    background, and the border's lower bound then lowered the sizes round it) no box gets a finer grid: the
+    field is the background grid's alone."""
+    from engine.sizing import field
+
+    monkeypatch.setattr(field, "FINER_TOTAL", 2_000)
+    _, sizing = sizing_for(SMALL_HOLE)
+    monkeypatch.setattr(field, "FINER_DEPTH", 0)
+    _, alone = sizing_for(SMALL_HOLE)
+    assert sizing.graded.finer == () and np.array_equal(sizing.grid, alone.grid)

@@ -24,8 +24,10 @@ if TYPE_CHECKING:
 GRID_NODES = 400_000  # background grid for the gradation
 FINER_BELOW = 0.25  # a cell whose size bound is under this x its width gets a finer grid (a box round such cells) ...
 FINER_MARGIN = 2  # ... reaching this many cells beyond them, ...
-FINER_NODES = 100_000  # ... of at most about this many nodes ...
-FINER_DEPTH = 3  # ... and finer again within it, at most this many times
+FINER_NODES = 200_000  # ... of at most about this many nodes, the finer grids within it included, ...
+FINER_TOTAL = GRID_NODES  # ... and this many in all (a finer grid costs what the background grid does per node), ...
+FINER_DEPTH = 3  # ... and finer again within it, at most this many times, ...
+FINER_STEP = 0.5  # ... each time with cells at most this x as wide
 GRADED_THRESHOLD = 0.01  # an element counts as graded when the gradation limit lowered its h by more than this share
 
 
@@ -85,7 +87,7 @@ class SizingField:
         placed = tuple(placed)
         lo, hi = geometry.bounds
         cell = max(float(np.cbrt(np.prod(hi - lo) / GRID_NODES)), float((hi - lo).max()) / 512)
-        graded, reach = _graded_grid(placed, lo, hi, cell, gradation, global_size)
+        graded, reach = _graded_grid(placed, lo, hi, cell, gradation, global_size, FINER_TOTAL)
         h_min, h_max = graded.extremes()
         if min_size is not None:
             h_min = max(h_min, min_size)
@@ -217,10 +219,12 @@ class GradedGrid:
         return low, high
 
 
-def _graded_grid(placed_patterns, lo, hi, cell: float, gradation: float, global_size: float, depth: int = 0):
-    """(GradedGrid over the box ``lo``..``hi`` with cells ``cell`` wide, G <= raw everywhere so h = G is exactly
-    Lipschitz; (patterns, cells) whether each pattern's mu can be above 0 somewhere in each cell (its upper
-    bound there), so an evaluation skips it elsewhere).
+def _graded_grid(
+    placed_patterns, lo, hi, cell: float, gradation: float, global_size: float, budget: float, depth: int = 0
+):
+    """(GradedGrid over the box ``lo``..``hi`` with cells ``cell`` wide and finer grids of ``budget`` nodes at most,
+    G <= raw everywhere so h = G is exactly Lipschitz; (patterns, cells) whether each pattern's mu can be above 0
+    somewhere in each cell (its upper bound there), so an evaluation skips it elsewhere).
 
     Each cell gets a lower bound of the raw size over the whole cell (:func:`_cell_bounds`); each node the
     minimum over its 8 cells; then the nodes are graded exactly in the L1 metric at (g - 1)/sqrt(3).
@@ -229,7 +233,8 @@ def _graded_grid(placed_patterns, lo, hi, cell: float, gradation: float, global_
     the feature's for a cell or two (a hole of radius 0.5 in a 200 x 100 x 10 plate, 0.0625 at its wall on
     0.79 cells: 2.7M of the mesh's 3.0M tets). So cells whose bound is under FINER_BELOW x their width, with
     FINER_MARGIN cells round them, get a finer grid of their own (each group of them one box, cells down to the
-    smallest bound in it, at most about FINER_NODES nodes, FINER_DEPTH levels deep), and h inside the box is
+    smallest bound in it; at most about FINER_NODES nodes each and FINER_TOTAL in all, the finer grids within
+    them included; FINER_DEPTH levels deep, each FINER_STEP x as wide or not at all), and h inside the box is
     the smaller of the two grids'. This grid's nodes in a box take the finer grid's sizes instead of its cells'
     bounds, and those on the box's border a lower bound of the finer grid's sizes round them
     (:meth:`GradedGrid.lowest_near`), so that on the border this grid is the smaller: h is continuous there,
@@ -242,13 +247,20 @@ def _graded_grid(placed_patterns, lo, hi, cell: float, gradation: float, global_
     cell_low, reach = _cell_bounds(placed_patterns, origin, cell, cells_shape, global_size)
     cells = cell_low.reshape(cells_shape)
     boxes = _finer_boxes(cells, cell) if depth < FINER_DEPTH else []
-    finer = []
+    finer, refined = [], []
     for box in boxes:
         box_lo = origin + cell * np.array([b.start for b in box])
         box_hi = origin + cell * np.array([b.stop for b in box])
-        finer_cell = max(float(cells[box].min()), float(np.cbrt(np.prod(box_hi - box_lo) / FINER_NODES)))
-        grid, _ = _graded_grid(placed_patterns, box_lo, box_hi, finer_cell, gradation, global_size, depth + 1)
+        share = min(FINER_NODES, budget / len(boxes))  # half for its own nodes, half for its finer grids
+        finer_cell = max(float(cells[box].min()), float(np.cbrt(np.prod(box_hi - box_lo) / (share / 2))))
+        if finer_cell > FINER_STEP * cell:  # too few nodes to be worth it (a plate with 60 small holes)
+            continue
+        grid, _ = _graded_grid(
+            placed_patterns, box_lo, box_hi, finer_cell, gradation, global_size, share / 2, depth + 1
+        )
         finer.append((box_lo, box_hi, grid))
+        refined.append(box)
+    boxes = refined
     for box in boxes:
         cells[box] = np.inf  # their nodes take the finer grid's sizes
     padded = np.pad(cells, 1, mode="edge")
