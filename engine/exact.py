@@ -40,6 +40,7 @@ ROUNDS = 8  # alternating projections onto the surfaces a curve borders
 FAITHFUL = 0.05  # x the local element size: how far the input's facets may lie from the surface nodes go onto
 SAME_SURFACE = 1e-4  # x the model size, and radians: two patches' fitted surfaces this close are one surface
 FLAT_AFTER_MOVE = 10.0  # deg: a tet the move onto the exact surfaces would leave flatter than this keeps its nodes
+CONE_STEPS = 100  # evaluations refining a cone fit: a cone's take 3-9, a face on none (an involute flank) wanders
 CLOSER = 10.0  # a simpler surface that fits a face is taken over a closer one if its error is within this factor
 EXACT_FIT = 1e-6  # ... or below this x the tolerance (roundoff: every surface that holds the face fits it exactly)
 # barycentric points of a facet where its distance from the surface is sampled: centroid, edge midpoints, and
@@ -182,17 +183,35 @@ def _refined(cone: Cone, vertices: np.ndarray) -> Cone:
         axis = np.array([np.sin(x[3]) * np.cos(x[4]), np.sin(x[3]) * np.sin(x[4]), np.cos(x[3])])
         return x[:3], axis, x[5]
 
-    def distances(x):
+    def parts(x):
         apex, axis, angle = unpack(x)
         rel = vertices - apex
         along = rel @ axis
-        across = np.linalg.norm(rel - np.outer(along, axis), axis=1)
+        across = np.maximum(np.linalg.norm(rel - np.outer(along, axis), axis=1), 1e-300)
+        return rel, along, across, axis, angle
+
+    def distances(x):
+        _, along, across, _, angle = parts(x)
         return across * np.cos(angle) - along * np.sin(angle)
+
+    def jacobian(x):  # (k, 6): d distance / d (apex, polar and azimuth of the axis, angle)
+        rel, along, across, axis, angle = parts(x)
+        radial = rel - np.outer(along, axis)
+        by_apex = -np.cos(angle) * radial / across[:, None] + np.sin(angle) * axis
+        by_axis = -(np.cos(angle) * along / across + np.sin(angle))[:, None] * rel
+        turns = np.array(
+            [
+                [np.cos(x[3]) * np.cos(x[4]), np.cos(x[3]) * np.sin(x[4]), -np.sin(x[3])],
+                [-np.sin(x[3]) * np.sin(x[4]), np.sin(x[3]) * np.cos(x[4]), 0.0],
+            ]
+        )
+        by_angle = -across * np.sin(angle) - along * np.cos(angle)
+        return np.column_stack([by_apex, by_axis @ turns.T, by_angle])
 
     start = np.r_[
         cone.apex, np.arccos(np.clip(cone.axis[2], -1, 1)), np.arctan2(cone.axis[1], cone.axis[0]), cone.angle
     ]
-    apex, axis, angle = unpack(least_squares(distances, start, method="lm").x)
+    apex, axis, angle = unpack(least_squares(distances, start, jac=jacobian, method="lm", max_nfev=CONE_STEPS).x)
     return Cone(apex, axis, float(angle)) if 0 < angle < np.pi / 2 else cone
 
 
