@@ -53,6 +53,7 @@ SLIVER = 1e-5  # x the model size: a face narrower than this on average is an ar
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
+TANGENT_STRIP = 0.01  # x the model size: a flat CAD face narrower than this joins a neighbour it meets smoothly
 # or round groove, a 'hole' (the turn knowledge/features.yaml tells a cylindrical hole from a fillet by)
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
@@ -489,18 +490,22 @@ class _CadFaces:
                 fix="heal the model in the CAD tool",
             )
         edge_faces = [[k for k in pair if keep[k]] for pair in self.edge_faces]
-        group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids)
+        strips = _tangent_strips(geometry, face, self.face_solids, self.feature_angle)
+        group = _groups(self.surfaces, edge_faces, geometry.scale, self.face_solids, strips)
         group = np.unique(group[face], return_inverse=True)[1] + 1  # per triangle, numbered among the kept faces
         group = self._halved(geometry, face, group)
-        first = np.unique(group, return_index=True)[1]  # a triangle of each group
+        area = np.bincount(face, geometry.mesh.area_faces, minlength=len(faces))
+        order = np.lexsort((area[face], group))  # by group, then by the area of the triangle's face
+        main = face[order[np.flatnonzero(np.diff(group[order], append=group.max() + 1))]]  # per group, its largest face
         charts = [self._chart(geometry, face, group == g) for g in range(1, group.max() + 1)]
         features = detect_features(  # a cylinder's faces, whose facets may fit none (B-spline, short), stay whole
             geometry,
             self.feature_angle,
             [lambda _, g=g: group == g for g in range(1, group.max() + 1)],
-            [self.surfaces[k].form == "Cylinder" or c is not None for k, c in zip(face[first], charts)],
+            [self.surfaces[k].form == "Cylinder" or c is not None for k, c in zip(main, charts)],
             tori=False,
         )
+        patch_main = [int(main[group[p.faces[0]] - 1]) for p in features.patches]
         patch_faces = [np.unique(face[group == group[p.faces[0]]]) for p in features.patches]
         patch_charts = tuple(
             charts[group[p.faces[0]] - 1] if len(p.faces) == (group == group[p.faces[0]]).sum() else None
@@ -508,22 +513,22 @@ class _CadFaces:
         )
         patches = [
             _face_kinds(
-                dataclasses.replace(
-                    patch, names=[self.face_names[k] for k in members], surface=self.surfaces[members[0]].label
-                ),
-                self.surfaces[members[0]],
+                dataclasses.replace(patch, names=[self.face_names[k] for k in members], surface=self.surfaces[k].label),
+                self.surfaces[k],
                 geometry,
                 np.flatnonzero(group == group[patch.faces[0]]),
             )
-            for patch, members in zip(features.patches, patch_faces)
+            for patch, members, k in zip(features.patches, patch_faces, patch_main)
         ]
         curve_edges = _curve_edges(features, geometry, face, edge_faces, model, edges)
         curves = [
             dataclasses.replace(curve, names=[self.edge_names[k] for k in members])
             for curve, members in zip(features.curves, curve_edges)
         ]
-        exact_patches = [
-            self.surfaces[m[0]].exact or CadEntity(model, 2, tuple(faces[m].tolist())) for m in patch_faces
+        exact_patches = [  # a strip's group: the closest point on its faces, not its largest face's surface
+            (None if np.isin(m, strips).any() else self.surfaces[k].exact)
+            or CadEntity(model, 2, tuple(faces[m].tolist()))
+            for m, k in zip(patch_faces, patch_main)
         ]
         exact_curves = [
             CadEntity(model, 1, tuple(edges[m].tolist()))
@@ -886,11 +891,11 @@ def _oriented(vertices: np.ndarray, triangles: np.ndarray, face: np.ndarray) -> 
     return np.where((volume[shells[face]] < 0)[:, None], out[:, ::-1], out)
 
 
-def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list) -> np.ndarray:
+def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list, joined: np.ndarray) -> np.ndarray:
     """Per CAD face, its patch group (1-based): faces joined by an edge (``edge_faces``: the face indices of
     each edge) that lie on one cylinder, cone, sphere or torus and bound the same solids (``face_solids``: so
     that a face two solids share is a patch of its own) share one; faces that fit one (:func:`_face_surface`)
-    within FIT_TOLERANCE x ``scale``."""
+    within FIT_TOLERANCE x ``scale``. So do the face pairs ``joined`` (k, 2) (:func:`_tangent_strips`)."""
     pairs = np.array([pair for pair in edge_faces if len(pair) == 2], np.int64).reshape(-1, 2)
     same = [
         face_solids[i] == face_solids[j]
@@ -903,10 +908,48 @@ def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list) -
         )
         for i, j in pairs
     ]
-    pairs = pairs[np.asarray(same, bool)] if len(pairs) else pairs
+    pairs = np.vstack([pairs[np.asarray(same, bool)] if len(pairs) else pairs, joined])
     graph = sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(surfaces),) * 2)
     labels = csgraph.connected_components(graph, directed=False)[1]
     return np.unique(labels, return_inverse=True)[1] + 1
+
+
+def _tangent_strips(geometry: Geometry, face: np.ndarray, face_solids: list, feature_angle: float) -> np.ndarray:
+    """(k, 2) CAD face indices (strip, neighbour): each face narrower on average (twice its area over its
+    perimeter, on the tessellation ``face``: per triangle) than TANGENT_STRIP x the model size, whose normals
+    turn less than ``feature_angle`` (degrees) over it, with the neighbour of the same solids it meets most
+    smoothly where that is under ``feature_angle`` all along their edge. An exporter's strip 0.14 mm wide
+    between a gear's flank and its root, tangent to both, is otherwise a patch of its own, its two edges curves
+    0.14 mm apart that the narrow-face rule sizes for (30x the elements); from an STL it is part of a
+    neighbour's patch, as now. A fillet or round turns more than the feature angle and stays a patch."""
+    mesh = geometry.mesh
+    count = len(face_solids)
+    sides = face[mesh.face_adjacency]
+    across = sides[:, 0] != sides[:, 1]
+    sides, angle = sides[across], mesh.face_adjacency_angles[across]
+    ends = mesh.vertices[mesh.face_adjacency_edges[across]]
+    perimeter = np.bincount(sides.ravel(), np.repeat(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1), 2), count)
+    area = np.bincount(face, mesh.area_faces, count)
+    width = np.divide(2 * area, perimeter, out=np.full(count, np.inf), where=perimeter > 0)
+    mean = np.zeros((count, 3))
+    np.add.at(mean, face, mesh.face_normals * mesh.area_faces[:, None])
+    spread = np.arccos(np.clip(np.einsum("ij,ij->i", mesh.face_normals, unit(mean)[face]), -1.0, 1.0))
+    turn = np.zeros(count)
+    np.maximum.at(turn, face, 2 * spread)  # at most twice the largest angle from the mean normal
+    limit = np.radians(feature_angle)
+    strip = (width < TANGENT_STRIP * geometry.scale) & (turn < limit)
+    owners = {}
+    solids = np.array([owners.setdefault(s, len(owners)) for s in face_solids])
+    one, other = np.concatenate([sides, sides[:, ::-1]]).T
+    angle = np.concatenate([angle, angle])
+    mine = strip[one] & (solids[one] == solids[other])
+    pair, at = np.unique(one[mine] * count + other[mine], return_inverse=True)
+    worst = np.zeros(len(pair))
+    np.maximum.at(worst, at, angle[mine])  # the sharpest turn along the pair's edges
+    pair, worst = pair[worst < limit], worst[worst < limit]
+    best = np.lexsort((worst, pair // count))  # per strip, its smoothest neighbour first
+    best = best[np.unique(pair[best] // count, return_index=True)[1]]
+    return np.column_stack([pair[best] // count, pair[best] % count])
 
 
 def _canonical(surface: Surface) -> np.ndarray:
