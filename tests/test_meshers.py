@@ -490,3 +490,22 @@ def test_a_chart_without_triangles_has_no_stray_points():
     none = np.zeros((0, 3), np.int64)
     point, badness, h = _stray_points(chart, uv, none, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     assert point.shape == (0, 2) and len(badness) == len(h) == 0
+
+
+def test_a_patch_node_slid_off_its_patch_or_against_its_border_is_put_back(built):
+    """Relocation weighs the tets round a node, not its surface triangles: a gear flank's node slid 1.1 h past
+    the flank's foot onto the root (7.6 deg), another to 0.07 h from the foot's curve (5.3 deg)."""
+    from engine.meshing.delaunay import _on_own_patches
+
+    shape, features = built("plate", length=10.0, width=10.0, thickness=10.0)
+    (top,) = [k for k, p in enumerate(features.patches) if "top" in p.names]
+    before = np.array([[-5, -5, 10], [5, -5, 10], [5, 5, 10], [-5, 5, 10], [0, 0, 10]], float)
+    level = np.array([CORNER] * 4 + [PATCH], np.int8)
+    entity = np.array([0, 1, 2, 3, top])
+    fan = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    # kept; on the side face (its triangles no worse than 0.5); against the border (a triangle of 0.03)
+    for after, kept in (([1.0, 0.5, 10.0], True), ([5.0, 0.0, 5.0], False), ([4.9, 0.5, 10.0], False)):
+        points = before.copy()
+        points[4] = after
+        out = _on_own_patches(points, before, np.array([4]), level, entity, fan, shape.geometry, features)
+        assert np.array_equal(out[4], after if kept else before[4])
