@@ -11,6 +11,8 @@ arc length; closed circular curves carry centre, axis and radius.
 
 from __future__ import annotations
 
+import difflib
+import re
 from dataclasses import dataclass, field, replace
 
 import igl
@@ -35,6 +37,7 @@ from .fitting import (
 from .geometry import Geometry
 from .mesh import triangle_edges
 
+NAMES_LISTED = 12  # feature names a log line or an error lists at most
 FLAT = 1e-7  # x the model size: a patch whose vertices all lie this near its mean plane is a plane (a CAD
 # tessellation's plane faces: 1e-9 to 1e-8, the coordinates' precision; at 1e-9 an outside test's bracket's
 # sides were "cylinders" of radius 1.8e8 and so concave fillets)
@@ -147,6 +150,16 @@ class Features:
     @property
     def names(self) -> list[str]:
         return sorted({n for group in (self.corners, self.curves, self.patches) for f in group for n in f.names})
+
+    def names_listed(self, near: str | None = None) -> str:
+        """The feature names for a log or an error: all of up to NAMES_LISTED, else the first of them in number
+        order (face-2 before face-10) or, given ``near``, those closest to it, and how many there are."""
+        names = sorted(self.names, key=lambda name: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)])
+        if len(names) <= NAMES_LISTED:
+            return ", ".join(names) or "none"
+        if near is not None and (close := difflib.get_close_matches(near, names, NAMES_LISTED, 0.5)):
+            return f"{', '.join(close)} (the closest to '{near}' of {len(names)}: fuzzymesh features lists them)"
+        return f"{', '.join(names[:NAMES_LISTED])} and {len(names) - NAMES_LISTED} more (fuzzymesh features lists them)"
 
 
 def curve_sides(geometry, features) -> dict[int, tuple[int, int]]:

@@ -259,7 +259,7 @@ def prepare(job: Job, max_elements: float | None = None, timings: dict | None = 
         len(features.corners),
         len(features.curves),
         len(features.patches),
-        ", ".join(features.names) or "none",
+        features.names_listed(),
         timings["geometry"],
     )
     with stage("sizing", timings):

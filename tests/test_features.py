@@ -307,3 +307,21 @@ def test_a_surface_that_cannot_be_cut_into_charts_is_refused_in_one_line_naming_
     monkeypatch.setattr(features, "MAX_SPLITS", 1)
     with pytest.raises(GeometryError, match=r"^ring\.stl: a smooth surface around .* cannot be cut into pieces"):
         detect_features(geometry, tori=False)
+
+
+def test_a_long_list_of_feature_names_is_cut_to_the_first_or_the_closest(built):
+    """A STEP gear's 1,157 face-N and edge-N names made its geometry log line 20 kB long."""
+    from dataclasses import replace
+
+    _, features = built("plate", length=10.0, width=10.0, thickness=2.0)
+    named = replace(
+        features,
+        corners=[replace(c, names=[f"corner-{k + 1}"]) for k, c in enumerate(features.corners)],
+        curves=[replace(c, names=[f"edge-{k + 1}"]) for k, c in enumerate(features.curves)],
+        patches=[replace(p, names=[f"face-{k + 1}"]) for k, p in enumerate(features.patches)],
+    )
+    assert len(named.names) == 26
+    first = [f"corner-{k}" for k in range(1, 9)] + [f"edge-{k}" for k in range(1, 5)]
+    assert named.names_listed() == f"{', '.join(first)} and 14 more (fuzzymesh features lists them)"
+    assert named.names_listed("edge-11").startswith("edge-11, edge-1")
+    assert replace(named, curves=[], corners=[]).names_listed() == "face-1, face-2, face-3, face-4, face-5, face-6"

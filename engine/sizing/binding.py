@@ -279,11 +279,10 @@ def _union(distances: list):
 
 
 def _no_feature(placement, features):
-    names = ", ".join(features.names) or "none"
     return KnowledgeError(
         f"no feature named '{placement.at}' of the kind the pattern needs",
         where=placement.source,
-        fix=f"named features of this solid: {names}",
+        fix=f"named features of this solid: {features.names_listed(placement.at)}",
     )
 
 
