@@ -492,20 +492,25 @@ def test_a_chart_without_triangles_has_no_stray_points():
     assert point.shape == (0, 2) and len(badness) == len(h) == 0
 
 
-def test_a_patch_node_slid_off_its_patch_or_against_its_border_is_put_back(built):
-    """Relocation weighs the tets round a node, not its surface triangles: a gear flank's node slid 1.1 h past
-    the flank's foot onto the root (7.6 deg), another to 0.07 h from the foot's curve (5.3 deg)."""
+def test_a_patch_node_slid_off_its_patch_or_to_poorer_tets_is_put_back(built):
+    """Relocation weighs a sliding node's tets off the surface: put back onto it, a gear flank's node had slid
+    1.1 h past the flank's foot onto the root (7.6 deg), another to 0.07 h from the foot's curve (5.3 deg)."""
     from engine.meshing.delaunay import _on_own_patches
 
     shape, features = built("plate", length=10.0, width=10.0, thickness=10.0)
     (top,) = [k for k, p in enumerate(features.patches) if "top" in p.names]
-    before = np.array([[-5, -5, 10], [5, -5, 10], [5, 5, 10], [-5, 5, 10], [0, 0, 10]], float)
-    level = np.array([CORNER] * 4 + [PATCH], np.int8)
-    entity = np.array([0, 1, 2, 3, top])
-    fan = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
-    # kept; on the side face (its triangles no worse than 0.5); against the border (a triangle of 0.03)
-    for after, kept in (([1.0, 0.5, 10.0], True), ([5.0, 0.0, 5.0], False), ([4.9, 0.5, 10.0], False)):
-        points = before.copy()
-        points[4] = after
-        out = _on_own_patches(points, before, np.array([4]), level, entity, fan, shape.geometry, features)
-        assert np.array_equal(out[4], after if kept else before[4])
+    points = np.array([[-5, -5, 10], [5, -5, 10], [5, 5, 10], [-5, 5, 10], [3, 3, 10], [0, 0, 2]], float)
+    level = np.array([CORNER] * 4 + [PATCH, VOLUME], np.int8)
+    entity = np.array([0, 1, 2, 3, top, -1])
+    star = np.array([[1, 0, 4, 5], [2, 1, 4, 5], [3, 2, 4, 5], [0, 3, 4, 5]])  # 14.5 deg at (3, 3)
+    none = np.zeros((0, 4), np.int64)
+    cases = (
+        ([0.5, 0.5, 10], star, True),  # 45.6 deg
+        ([4.99, 0, 10], star, False),  # 0.1 deg, against the border
+        ([5, 0, 8], none, False),  # on the side face (its tets aside)
+    )
+    for after, tets, kept in cases:
+        slid = points.copy()
+        slid[4] = after
+        out = _on_own_patches(slid, points, np.array([4]), level, entity, tets, shape.geometry, features)
+        assert np.array_equal(out[4], after if kept else points[4])

@@ -26,7 +26,6 @@ import numpy as np
 from ..levels import STEINER
 from ..mesh import TetMesh, signed_volumes
 from ..packing import CURVE, PATCH, VOLUME
-from ..quality import triangle_quality
 from . import register_mesher
 from .improve import (
     FLOOR,
@@ -48,7 +47,6 @@ log = logging.getLogger(__name__)
 
 RESTORE_ROUNDS = 4  # rounds of putting back slid nodes whose tets turned non-positive
 SURFACE_TOLERANCE = 0.05  # x h: how far from the input surface a peel or collapse may put boundary faces
-SLID_TRIANGLE = 0.3  # a slide may not leave a boundary triangle of its node worse than it was and under this
 REPAIR_ROUNDS = 4  # rounds of peels, collapses and swaps of what is still under the floor
 
 
@@ -108,7 +106,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
         points[slid] = geometry.closest_point(points[slid])[0]  # back onto the surface
-        points = _on_own_patches(points, unslid, slid, level, entity, boundary, geometry, features)
+        points = _on_own_patches(points, unslid, slid, level, entity, tets, geometry, features)
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
     points, tets, capped = fill_flat_caps(points, tets, boundary, TARGET)
     if capped:  # nodes beneath flat caps: the mesher's own, free like Steiner nodes
@@ -273,22 +271,21 @@ def _on_surface(geometry):
     return at
 
 
-def _on_own_patches(points, before, slid, level, entity, boundary, geometry, features) -> np.ndarray:
-    """``points`` with the ``slid`` patch nodes put back where ``before`` has them when the slide took them off
-    their own patch (past a feature curve) or left one of their boundary triangles under SLID_TRIANGLE and worse
-    than it was (against a curve): the tets' quality that relocation weighs does not see the surface. A gear's
-    flank node slid 1.1 h along the flank past its foot onto the root (a 7.6 deg tet), another to 0.07 h from the
-    foot's curve (boundary triangle 0.13, 5.3 deg)."""
+def _on_own_patches(points, before, slid, level, entity, tets, geometry, features) -> np.ndarray:
+    """``points`` with the ``slid`` patch nodes put back where ``before`` has them when the slide, once put back
+    onto the surface, took them off their own patch (past a feature curve) or left their tets' smallest dihedral
+    angle lower than before the slide (all of them; node by node, with the other nodes slid, the gear below kept
+    9.5 deg): relocation weighed the tets with the node off the surface. A gear's flank node slid 1.1 h along
+    the flank past its foot onto the root (a 7.6 deg tet), another to 0.07 h from the foot's curve (5.3 deg)."""
     patch_node = slid[level[slid] == PATCH]
     face = geometry.closest_point(points[patch_node])[2]
-    back = patch_node[features.face_patch[face] != entity[patch_node]]
-    mine = np.isin(boundary, patch_node).any(axis=1)
-    triangles = boundary[mine]
-    worst_before, worst_after = np.full(len(points), np.inf), np.full(len(points), np.inf)
-    np.minimum.at(worst_before, triangles, triangle_quality(before, triangles)[:, None])
-    np.minimum.at(worst_after, triangles, triangle_quality(points, triangles)[:, None])
-    worse = patch_node[(worst_after[patch_node] < SLID_TRIANGLE) & (worst_after[patch_node] < worst_before[patch_node])]
-    back = np.union1d(back, worse)
+    astray = patch_node[features.face_patch[face] != entity[patch_node]]
+    star = tets[np.isin(tets, patch_node).any(axis=1)]
+    star_before, star_after = np.full(len(points), np.inf), np.full(len(points), np.inf)
+    np.minimum.at(star_before, star, min_dihedrals(before, star)[:, None])
+    np.minimum.at(star_after, star, min_dihedrals(points, star)[:, None])
+    poorer = patch_node[star_after[patch_node] < star_before[patch_node]]
+    back = np.union1d(astray, poorer)
     points[back] = before[back]
     return points
 
