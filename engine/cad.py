@@ -918,7 +918,8 @@ def _tangent_strips(geometry: Geometry, face: np.ndarray, face_solids: list, fea
     """(k, 2) CAD face indices (strip, neighbour): each face narrower on average (twice its area over its
     perimeter, on the tessellation ``face``: per triangle) than TANGENT_STRIP x the model size, whose normals
     turn less than ``feature_angle`` (degrees) over it, with the neighbour of the same solids it meets most
-    smoothly where that is under ``feature_angle`` all along their edge. An exporter's strip 0.14 mm wide
+    smoothly where that is under ``feature_angle`` all along their edge, a wider one before another strip (two
+    strips side by side, each the other's smoothest, stayed a strip). An exporter's strip 0.14 mm wide
     between a gear's flank and its root, tangent to both, is otherwise a patch of its own, its two edges curves
     0.14 mm apart that the narrow-face rule sizes for (30x the elements); from an STL it is part of a
     neighbour's patch, as now. A fillet or round turns more than the feature angle and stays a patch."""
@@ -947,7 +948,7 @@ def _tangent_strips(geometry: Geometry, face: np.ndarray, face_solids: list, fea
     worst = np.zeros(len(pair))
     np.maximum.at(worst, at, angle[mine])  # the sharpest turn along the pair's edges
     pair, worst = pair[worst < limit], worst[worst < limit]
-    best = np.lexsort((worst, pair // count))  # per strip, its smoothest neighbour first
+    best = np.lexsort((worst, strip[pair % count], pair // count))  # per strip, its smoothest wider neighbour first
     best = best[np.unique(pair[best] // count, return_index=True)[1]]
     return np.column_stack([pair[best] // count, pair[best] % count])
 
