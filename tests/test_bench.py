@@ -105,7 +105,10 @@ def test_paper_scale_and_targets(tiny):
     out, results = tiny
     paper = results["paper_scale"]
     assert 5_000 < paper["tets"] < 9_000 and paper["repeats"] == 1
-    assert 0 < paper["mesh"]["median"] <= paper["mesh_and_files"]["median"]
+    # the stages are parts of the run they were timed in (two runs' times, mesh only against mesh and files, are
+    # not ordered on a busy machine: 1.72 s against 1.56 s in one CI run)
+    assert 0 < sum(paper["mesh"]["stages"].values()) <= paper["mesh"]["median"]
+    assert paper["mesh_and_files"]["median"] > 0 and paper["command"]["median"] > 0
     assert set(paper["mesh"]["stages"]) >= set(MESH_STAGES["fuzzymesh"])
     (row,) = results["rows"]
     ours, hxt = row["meshers"]["fuzzymesh"], row["meshers"]["gmsh-hxt"]
