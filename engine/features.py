@@ -289,6 +289,7 @@ def detect_features(
         np.degrees(mesh.face_adjacency_angles[sharp]),
         truly_sharp[sharp],
         threshold,
+        np.abs(mesh.vertex_defects) > threshold,
     )
     cylinders = faceted_cylinders(mesh, patches, face_patch, sharp)
     return Features(
@@ -1074,7 +1075,12 @@ def _curves(
     dihedral: np.ndarray,
     truly_sharp: np.ndarray,
     turn_threshold: float,
+    tips: np.ndarray,
 ):
+    """(corners, curves) of the feature ``edges`` (e, 2) into ``vertices``: a corner where other than two edges
+    meet, where a sharp chain goes on as a smooth cut or turns by more than ``turn_threshold`` (radians), and at
+    a ``tips`` vertex (mask over ``vertices``: the surface's angle defect there exceeds it, a cone's apex, where a
+    smooth cut down a centre hole's cone to its tip and up again had no node) on any chain."""
     if len(edges) == 0:
         return [], []
     nv = len(vertices)
@@ -1085,6 +1091,7 @@ def _curves(
     # a sharp chain turning by more than the feature angle has a corner there; a smooth cut follows
     # the input's edges, whose zigzag is no corner
     corner_mask |= _sharp_turns(vertices, edges[truly_sharp], sharp_degree, turn_threshold) & (degree == 2)
+    corner_mask |= tips & (degree == 2)
     # edges belong to one curve when they share a vertex that is not a corner
     ne = len(edges)
     ends = np.concatenate([edges[:, 0], edges[:, 1]])

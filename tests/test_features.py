@@ -1,8 +1,12 @@
+import math
+
 import numpy as np
 import pytest
 from conftest import gmsh_model
 
 from engine.features import detect_features
+from engine.job import job_from_dict
+from engine.pipeline import run
 
 
 def test_plate_has_the_corners_edges_and_faces_of_a_box(built):
@@ -223,7 +227,6 @@ def test_a_keyed_bore_and_a_slot_end_are_holes_and_a_fillet_is_not(source, tmp_p
 def test_a_bent_pipe_s_bore_is_a_hole_and_its_outside_no_fillet(tmp_path):
     """A concave torus turning all the way round its tube is a bent bore, a 'hole' of the tube's radius; a
     fillet's torus turns a quarter (an outside test's pipe elbow bore was a 'fillet')."""
-    import math
 
     import gmsh
 
@@ -325,3 +328,31 @@ def test_a_long_list_of_feature_names_is_cut_to_the_first_or_the_closest(built):
     assert named.names_listed() == f"{', '.join(first)} and 14 more (fuzzymesh features lists them)"
     assert named.names_listed("edge-11").startswith("edge-11, edge-1")
     assert replace(named, curves=[], corners=[]).names_listed() == "face-1, face-2, face-3, face-4, face-5, face-6"
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".step"])
+def test_a_centre_hole_s_cone_tip_is_a_corner_of_its_cut_and_a_node_of_the_mesh(tmp_path, suffix):
+    """A bar r 10 with a 60 deg centre hole (cone r 2.3, 4 deep): its cone, a closed smooth patch, is cut in two
+    down to the tip and up again; the zigzag's removal took that V's tip for a tooth, round after round (the cut
+    stopped 0.8 mm short), and the mesh cut the tip off: exit 4, 2.9 h off the input, on every input of an
+    outside test's shaft. The tip is now a corner (its angle defect, 181 deg, is over the feature angle)."""
+    import gmsh
+
+    from engine.describe import solid_features
+
+    path = tmp_path / f"bar{suffix}"
+    with gmsh_model("test-centre-hole") as occ:
+        bar = occ.addCylinder(0, 0, 0, 0, 0, 40, 10)
+        occ.cut([(3, bar)], [(3, occ.addCone(0, 0, 40.01, 0, 0, -4, 2.3, 0))])
+        occ.synchronize()
+        if suffix == ".stl":
+            gmsh.option.setNumber("Mesh.StlLinearDeflectionRelative", 0)
+            gmsh.option.setNumber("Mesh.StlLinearDeflection", 0.08)
+            gmsh.option.setNumber("Mesh.StlAngularDeflection", math.radians(15))
+        gmsh.write(str(path))
+    _, geometry, features = solid_features(path)
+    tip = np.array([0.0, 0.0, 40.01 - 4.0])
+    assert min(np.linalg.norm(c.point - tip) for c in features.corners) < 1e-6
+    result = run(job_from_dict({"geometry": {"file": str(path)}}), write=False)
+    assert np.linalg.norm(result.mesh.points - tip, axis=1).min() < 1e-6
+    assert result.boundary["hausdorff_input_to_mesh"]["max_over_h"] < 0.25
