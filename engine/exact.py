@@ -40,7 +40,7 @@ ROUNDS = 8  # alternating projections onto the surfaces a curve borders
 FAITHFUL = 0.05  # x the local element size: how far the input's facets may lie from the surface nodes go onto
 SAME_SURFACE = 1e-4  # x the model size, and radians: two patches' fitted surfaces this close are one surface
 FLAT_AFTER_MOVE = 10.0  # deg: a tet the move onto the exact surfaces would leave flatter than this keeps its nodes
-CONE_STEPS = 100  # evaluations refining a cone fit: a cone's take 3-9, a face on none (an involute flank) wanders
+CONE_STEPS = 30  # evaluations refining a cone fit: a cone's take 3-9, a face on none (an involute flank) wanders
 CLOSER = 10.0  # a simpler surface that fits a face is taken over a closer one if its error is within this factor
 EXACT_FIT = 1e-6  # ... or below this x the tolerance (roundoff: every surface that holds the face fits it exactly)
 # barycentric points of a facet where its distance from the surface is sampled: centroid, edge midpoints, and
