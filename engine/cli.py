@@ -82,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive_float,
         default=None,
         help="refuse jobs expected to exceed this many tetrahedra (default: 2e7, and refuse jobs expected to need "
-        "more memory than this machine has; a limit given here skips the memory check)",
+        "more memory than this machine has available; a limit given here skips the memory check)",
     )
     mesh.add_argument("-q", "--quiet", action="store_true", help="print warnings and errors only")
     mesh.add_argument(
