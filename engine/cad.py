@@ -52,9 +52,8 @@ HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are se
 SLIVER = 1e-5  # x the model size: a face narrower than this on average is an artefact the model is healed of
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
-NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
 TANGENT_STRIP = 0.01  # x the model size: a flat CAD face narrower than this joins a neighbour it meets smoothly
-# or round groove, a 'hole' (the turn knowledge/features.yaml tells a cylindrical hole from a fillet by)
+NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
 FIT_TOLERANCE = 1e-4  # x the model size: a non-analytic face whose points lie this near one is that surface
