@@ -433,6 +433,7 @@ MAX_STRETCH = 1.6  # ... and its conformal map stretches lengths by at most this
 STRETCH_SHARE = 0.01  # ... but for this share of its area at either end, ...
 TIP_EXTENT = 0.1  # ... if it lies this close (x the chart's size) round one point (a cone's tip)
 COPLANAR = 1e-3  # radians: faces meeting at a smaller angle lie in one plane
+NARROW_REGION = 0.01  # x the model size: a coplanar region no wider than this is a strip of the surface it bends into
 WIDE = 3.0  # a coplanar region this many times wider than the facets it bends into is a plane
 MAX_SPLITS = 16  # halvings of a piece's normal spread before it is taken as it is
 SEED_BAND = 0.25  # a halved piece's faces in this top and bottom share of their normals' spread stay apart
@@ -583,7 +584,7 @@ def _wide(mesh, region: np.ndarray, bent: np.ndarray) -> np.ndarray:
     height = 2 * area[other] / np.maximum(length, 1e-300)
     beyond = np.bincount(region[side], weights=height * length, minlength=count) / np.maximum(border, 1e-300)
     width = np.bincount(region, weights=area, minlength=count) / np.maximum(border, 1e-300)
-    return (width > WIDE * beyond) & (np.bincount(region, minlength=count) > 1)
+    return (width > WIDE * beyond) & (width > NARROW_REGION * mesh.scale) & (np.bincount(region, minlength=count) > 1)
 
 
 def _cylinders_apart(mesh, piece: np.ndarray, strip: np.ndarray, pairs: np.ndarray):

@@ -6,7 +6,7 @@ from conftest import gmsh_model
 
 from engine.features import detect_features
 from engine.job import job_from_dict
-from engine.pipeline import run
+from engine.pipeline import prepare, run
 
 
 def test_plate_has_the_corners_edges_and_faces_of_a_box(built):
@@ -356,3 +356,35 @@ def test_a_centre_hole_s_cone_tip_is_a_corner_of_its_cut_and_a_node_of_the_mesh(
     result = run(job_from_dict({"geometry": {"file": str(path)}}), write=False)
     assert np.linalg.norm(result.mesh.points - tip, axis=1).min() < 1e-6
     assert result.boundary["hausdorff_input_to_mesh"]["max_over_h"] < 0.25
+
+
+def test_a_sliver_facet_strip_of_a_bore_is_no_plane_of_its_own(tmp_path):
+    """An outside test's clevis: OpenCASCADE's fine tessellation of its r 8 bore (broken into by a lube hole and
+    the fork's slot) is fans of facets 34 mm long and 0.02-0.35 high. Two coplanar ones were wider than 3x the
+    slivers they bend into (by 0.1 deg) and so 'planes' of their own: two patches 0.06 mm wide, curves that close,
+    narrow-face at 0.0625 and 468k tets at 3.6 deg (the coarse STL: 125k, 13.3 deg). A coplanar region no wider
+    than NARROW_REGION x the model size is a strip of the surface it bends into."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("make_parts", Path(__file__).parent / "parts" / "make_parts.py")
+    make_parts = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make_parts)
+    path = tmp_path / "clevis-fine.stl"
+    with gmsh_model("test-clevis") as occ:
+        shank = occ.addCylinder(0, 0, -40, 0, 0, 40.5, 15)
+        fork = make_parts._fuse(occ.addBox(-15, -15, 0, 30, 30, 30), occ.addCylinder(0, -15, 30, 0, 30, 0, 15))
+        clevis = make_parts._cut(
+            make_parts._fuse(shank, fork),
+            occ.addBox(-16, -7, 15, 32, 14, 40),
+            occ.addCylinder(0, -16, 30, 0, 32, 0, 5),
+            make_parts._hole(0, 0, -41, 34, 8),
+            occ.addCylinder(-16, 0, -20, 32, 0, 0, 1.5),
+        )
+        occ.synchronize()
+        angle, linear = make_parts.TESSELLATIONS["fine"]
+        lo, hi = np.reshape(occ.getBoundingBox(3, clevis), (2, 3))
+        make_parts._export(path, angle, linear * float(np.linalg.norm(hi - lo)))
+    make_parts._clean(path)
+    _, _, _, sizing = prepare(job_from_dict({"geometry": {"file": str(path)}}))
+    assert not any(p.pattern == "narrow-face" for p in sizing.placed)
