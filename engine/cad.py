@@ -37,7 +37,7 @@ from scipy.sparse import csgraph
 from .errors import GeometryError
 from .exact import EXACT_TOLERANCE, Cone, CylinderSurface, Plane, Sphere, Torus, fit_analytic
 from .facechart import FaceChart
-from .features import Features, detect_features, unit
+from .features import NARROW_REGION, Features, detect_features, unit
 from .fitting import Circle, Cylinder, sweep, torus_kind, tube_sweep
 from .geometry import Geometry, validate_surface
 
@@ -52,7 +52,6 @@ HEAL_TOLERANCE = 1e-6  # x the model size: faces of a file without solids are se
 SLIVER = 1e-5  # x the model size: a face narrower than this on average is an artefact the model is healed of
 SAME_SURFACE = 1e-6  # x the model size: two faces' parameters closer than this describe one surface
 UNNAMED_PRODUCT = "Open CASCADE STEP translator"  # the product name OpenCASCADE writes for an unnamed solid
-TANGENT_STRIP = 0.01  # x the model size: a flat CAD face narrower than this joins a neighbour it meets smoothly
 NARROW = 1.0  # a cone narrower along its slant than this x its mean radius is a chamfer
 ANALYTIC = ("Plane", "Cylinder", "Cone", "Sphere", "Torus")  # the face types whose parameters Gmsh gives
 FIT_POINTS = 23  # per parameter, a non-analytic face's points fitted (a prime: not all on a spline's knots)
@@ -306,7 +305,7 @@ def load_cad(path: str | Path, feature_angle: float = 30.0, *, allow_multiple_so
                 fix="export the part as a solid body",
             )
         faces = np.array([tag for _, tag in gm.getEntities(2)])
-        size = float(np.linalg.norm(np.diff(np.reshape(gm.getBoundingBox(-1, -1), (2, 3)), axis=0)))
+        size = _model_size(model.name, gm)
         face_solids = [tuple(sorted(np.searchsorted(solids, gm.getAdjacencies(2, tag)[0]).tolist())) for tag in faces]
         shared = [k for k, owners in enumerate(face_solids) if len(owners) > 1]
         touching = len({b for k in shared for b in face_solids[k]})
@@ -923,7 +922,8 @@ def _groups(surfaces: list, edge_faces: list, scale: float, face_solids: list, j
 
 def _tangent_strips(geometry: Geometry, face: np.ndarray, face_solids: list, feature_angle: float) -> np.ndarray:
     """(k, 2) CAD face indices (strip, neighbour): each face narrower on average (twice its area over its
-    perimeter, on the tessellation ``face``: per triangle) than TANGENT_STRIP x the model size, whose normals
+    perimeter, on the tessellation ``face``: per triangle) than NARROW_REGION x the model size (as a coplanar
+    region of an STL's chart must be wider, engine/features.py), whose normals
     turn less than ``feature_angle`` (degrees) over it, with the neighbour of the same solids it meets most
     smoothly where that is under ``feature_angle`` all along their edge, a wider one before another strip (two
     strips side by side, each the other's smoothest, stayed a strip). An exporter's strip 0.14 mm wide
@@ -945,7 +945,7 @@ def _tangent_strips(geometry: Geometry, face: np.ndarray, face_solids: list, fea
     turn = np.zeros(count)
     np.maximum.at(turn, face, 2 * spread)  # at most twice the largest angle from the mean normal
     limit = np.radians(feature_angle)
-    strip = (width < TANGENT_STRIP * geometry.scale) & (turn < limit)
+    strip = (width < NARROW_REGION * geometry.scale) & (turn < limit)
     owners = {}
     solids = np.array([owners.setdefault(s, len(owners)) for s in face_solids])
     one, other = np.concatenate([sides, sides[:, ::-1]]).T

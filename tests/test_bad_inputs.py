@@ -873,6 +873,8 @@ def test_the_default_limit_is_what_the_machine_s_memory_holds(capsys, tmp_path, 
     job expected at 14 GB ran 11 minutes where another user held half of a 23 GB machine."""
     from engine.sizing import counts
 
+    available, total = counts.available_memory()  # this machine's, read from /proc/meminfo
+    assert 0 < available <= total < float("inf")
     monkeypatch.setattr(counts, "available_memory", lambda: (2.0**29, 2.0**34))  # the junction at size 2: ~1 GiB
     job = write_job(
         tmp_path,

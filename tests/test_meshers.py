@@ -512,5 +512,6 @@ def test_a_patch_node_slid_off_its_patch_or_to_poorer_tets_is_put_back(built):
     for after, tets, kept in cases:
         slid = points.copy()
         slid[4] = after
-        out = _on_own_patches(slid, points, np.array([4]), level, entity, tets, shape.geometry, features)
+        landed = features.face_patch[shape.geometry.closest_point(slid[[4]])[2]]
+        out = _on_own_patches(slid, points, np.array([4]), landed, level, entity, tets)
         assert np.array_equal(out[4], after if kept else points[4])

@@ -105,8 +105,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         moves += more
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
-        points[slid] = geometry.closest_point(points[slid])[0]  # back onto the surface
-        points = _on_own_patches(points, unslid, slid, level, entity, tets, geometry, features)
+        points[slid], _, face = geometry.closest_point(points[slid])  # back onto the surface
+        points = _on_own_patches(points, unslid, slid, features.face_patch[face], level, entity, tets)
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
     points, tets, capped = fill_flat_caps(points, tets, boundary, TARGET)
     if capped:  # nodes beneath flat caps: the mesher's own, free like Steiner nodes
@@ -271,15 +271,16 @@ def _on_surface(geometry):
     return at
 
 
-def _on_own_patches(points, before, slid, level, entity, tets, geometry, features) -> np.ndarray:
+def _on_own_patches(points, before, slid, landed, level, entity, tets) -> np.ndarray:
     """``points`` with the ``slid`` patch nodes put back where ``before`` has them when the slide, once put back
-    onto the surface, took them off their own patch (past a feature curve) or left their tets' smallest dihedral
-    angle lower than before the slide (all of them; node by node, with the other nodes slid, the gear below kept
-    9.5 deg): relocation weighed the tets with the node off the surface. A gear's flank node slid 1.1 h along
-    the flank past its foot onto the root (a 7.6 deg tet), another to 0.07 h from the foot's curve (5.3 deg)."""
-    patch_node = slid[level[slid] == PATCH]
-    face = geometry.closest_point(points[patch_node])[2]
-    astray = patch_node[features.face_patch[face] != entity[patch_node]]
+    onto the surface (on the patch ``landed``, per slid node), took them off their own patch (past a feature
+    curve) or left their tets' smallest dihedral angle lower than before the slide (all of them; node by node,
+    with the other nodes slid, the gear below kept 9.5 deg): relocation weighed the tets with the node off the
+    surface. A gear's flank node slid 1.1 h along the flank past its foot onto the root (a 7.6 deg tet), another
+    to 0.07 h from the foot's curve (5.3 deg)."""
+    on_patch = level[slid] == PATCH
+    patch_node = slid[on_patch]
+    astray = patch_node[landed[on_patch] != entity[patch_node]]
     star = tets[np.isin(tets, patch_node).any(axis=1)]
     star_before, star_after = np.full(len(points), np.inf), np.full(len(points), np.inf)
     np.minimum.at(star_before, star, min_dihedrals(before, star)[:, None])
