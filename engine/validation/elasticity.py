@@ -22,6 +22,11 @@ from ..fe import CORNER, quadratic, row_index, tet_boundary
 
 QUADRATURE_ORDER = 2  # exact for the stiffness of straight quadratic tets (4 points); standard for C3D10
 TOLERANCE = 1e-10  # relative residual of the conjugate gradients
+# pyamg's default Jacobi prolongation smoother scales by a spectral radius estimated from a random start
+# (numpy's global generator): not reproducible, and now and then an underestimate that made CG diverge (a bracket
+# mesh solved twice in one process: 57 steps to 1e-10, then 1,000 steps to 0.1). 'local' weighting bounds it
+# row by row instead: the same preconditioner every time.
+PROLONGATION_SMOOTHER = ("jacobi", {"omega": 4.0 / 3.0, "weighting": "local"})
 
 
 @dataclass(frozen=True)
@@ -187,7 +192,11 @@ def solve(model: Model, K, f: np.ndarray, fixed: np.ndarray) -> tuple[np.ndarray
 
     A, b, u, free = condense(K, f, D=np.unique(fixed))
     solver = pyamg.smoothed_aggregation_solver(
-        A.tocsr(), B=rigid_modes(model.basis.doflocs)[free], max_levels=2, coarse_solver="splu"
+        A.tocsr(),
+        B=rigid_modes(model.basis.doflocs)[free],
+        smooth=PROLONGATION_SMOOTHER,
+        max_levels=2,
+        coarse_solver="splu",
     )
     residuals: list = []
     u[free] = solver.solve(b, tol=TOLERANCE, accel="cg", maxiter=1000, residuals=residuals)
