@@ -348,6 +348,36 @@ def test_a_flat_tet_inside_is_unfolded_not_dropped():
     assert {tuple(sorted(f)) for f in mesh.boundary_faces().tolist()} == {tuple(sorted(f)) for f in pyramid}
 
 
+def test_a_flat_tet_between_no_pyramids_is_swapped_out_not_dropped():
+    """The square's upper side is split by a-c into triangles of two tets of different apexes (no pyramid to
+    re-split: a rectangle rim to edge through a 10 mm ligament at h 11, seeds 0 and 1, refused with 4 boundary
+    edges), the lower side by b-d: unfold_flat keeps the flat tet, the mesher's swaps remove it (edge a-c's
+    ring retriangulated): every tet positive, the volume and the outer faces as before."""
+    from engine.mesh import TetMesh, signed_volumes
+    from engine.meshing.delaunay import FLAT_QUALITY
+    from engine.meshing.improve import swap_bad_faces
+    from engine.meshing.tetra import orient, unfold_flat
+
+    a, b, c, d, p1, p2, q = range(7)
+    points = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [1.4, 0.2, 1], [0.6, 0.8, 1], [1, 0.5, -1]], float)
+    # the flat tet in the order its neighbours agree with (positive with the ridge a-c lifted, b-d lowered)
+    rows = [[p1, a, b, c], [p2, a, c, d], [p1, p2, a, c], [q, a, b, d], [q, b, c, d], [b, a, c, d]]
+    tets, volumes = orient(points, np.array(rows))
+    outer = {
+        tuple(sorted(f))
+        for f in TetMesh(points=points, tets=tets, node_level=np.zeros(7, np.int8), node_entity=np.zeros(7, np.int64))
+        .boundary_faces()
+        .tolist()
+    }
+    kept = unfold_flat(points, tets)
+    assert len(kept) == 6  # not dropped: that left a hole
+    swapped, flips = swap_bad_faces(points, kept, FLAT_QUALITY)
+    assert flips >= 1 and (signed_volumes(points, swapped) > 1e-3).all()
+    assert signed_volumes(points, swapped).sum() == pytest.approx(volumes.sum())
+    mesh = TetMesh(points=points, tets=swapped, node_level=np.zeros(7, np.int8), node_entity=np.zeros(7, np.int64))
+    assert {tuple(sorted(f)) for f in mesh.boundary_faces().tolist()} == outer
+
+
 def test_a_flat_cap_gets_a_node_beneath_it():
     """A flat tet under a roof of two boundary faces (16 deg, a fold on a convex patch: no swap of its ring
     helps) becomes, with the ring around its inner edge, the star of one new node beneath: every tet

@@ -8,7 +8,8 @@
    kept, tagged ``steiner``, and counted.
 3. IN/OUT: regions of tets between the boundary triangles are classified by
    the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``);
-   a flat tet inside is unfolded (``tetra.unfold_flat``).
+   a flat tet inside is unfolded (``tetra.unfold_flat``), or, where its sides
+   are no pyramids, swapped out (``improve.swap_bad_faces``).
 4. Quality improvement (``improve.py``): boundary nodes move only in the
    last relocation pass (sliding on the surface and put back onto it); flat
    caps get a node beneath them (tagged ``steiner``); what is still under
@@ -41,13 +42,14 @@ from .improve import (
     swap_bad_faces,
 )
 from .surface import check_closed, triangulate_boundary
-from .tetra import canonical, compact, inside_by_boundary, orient, tetrahedralize, unfold_flat
+from .tetra import canonical, compact, flat_tets, inside_by_boundary, orient, tetrahedralize, unfold_flat
 
 log = logging.getLogger(__name__)
 
 RESTORE_ROUNDS = 4  # rounds of putting back slid nodes whose tets turned non-positive
 SURFACE_TOLERANCE = 0.05  # x h: how far from the input surface a peel or collapse may put boundary faces
 REPAIR_ROUNDS = 4  # rounds of peels, collapses and swaps of what is still under the floor
+FLAT_QUALITY = 1e-6  # quality under which the swaps take a flat tet tetra.unfold_flat left (and any as flat)
 
 
 @register_mesher("delaunay")
@@ -88,6 +90,8 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
     hull_tets = len(tets)
     tets = unfold_flat(points, tets[inside_by_boundary(points, tets, boundary)])
     tets = canonical(orient(points, tets)[0])  # Gmsh's order varies from run to run
+    if flat_tets(points, tets).any():  # one unfold_flat could not unfold: swapped out before anything else
+        tets = canonical(orient(points, swap_bad_faces(points, tets, FLAT_QUALITY)[0])[0])
     seconds["connect"] = time.perf_counter() - start
 
     start = time.perf_counter()

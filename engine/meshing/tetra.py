@@ -153,40 +153,43 @@ def _inside_by_boundary(points, tets, boundary, start, star, faces):
 
 
 def unfold_flat(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """``tets`` without their flat tetrahedra: each one inside the mesh is unfolded, the rest dropped.
+    """``tets`` (all inside the solid) with their flat tetrahedra unfolded where their sides are two pyramids.
 
     Four coplanar nodes on one sphere (a thin plate's edges packed alike on its top and bottom, a rectangle of
     four nodes across a corner) have two Delaunay diagonals; HXT may split the quad by one for the pyramid on
     one side and by the other for the pyramid on the other side, with a zero-volume tet between them, which
     the IN/OUT pass could only drop (a hole in the solid: the boundary is not a two-manifold). The pyramid
     whose apex sees the quad from one side is re-split by the other side's diagonal, whichever of the two
-    re-splits leaves the better worst tet; a flat tet whose sides are not two such pyramids is dropped.
+    re-splits leaves the better worst tet. A flat tet whose sides are not two such pyramids (each side's two
+    triangles in tets of different apexes: a rectangle through a 10 mm ligament, rim to plate edge, at h 11)
+    stays, for the mesher's swaps to take out (``improve.swap_bad_faces``): dropping it left the same hole.
     """
     tets = np.ascontiguousarray(tets, dtype=np.int64)
-    flat = np.flatnonzero(_flat(np.ascontiguousarray(points, dtype=np.float64), tets))
+    flat = np.flatnonzero(flat_tets(points, tets))
     if not len(flat):
         return tets
     start, star = node_stars(tets, len(points))
+    taken = np.zeros(len(tets), bool)  # flat, or re-split already
+    taken[flat] = True
     gone = np.zeros(len(tets), bool)
-    gone[flat] = True
     added = []
     for t in flat:
         own = np.sort(tets[t, FACES], axis=1)
         across = [find_face(tets, start, star, *face, t)[0] for face in own]
-        if min(across) < 0 or gone[across].any():
+        if min(across) < 0 or taken[across].any():
             continue
         apex = [int(np.setdiff1d(tets[s], tets[t])[0]) for s in across]
         sides = [(k, j) for k in range(4) for j in range(k + 1, 4) if apex[k] == apex[j]]
         if len(sides) != 2 or sorted(sides[0] + sides[1]) != [0, 1, 2, 3]:
             continue
-        best = None
+        best = None  # (worst new quality, the pyramid re-split, its new tets)
         for keep, redo in (sides, sides[::-1]):  # the pyramid 'redo' takes the triangles of the pyramid 'keep'
             new, _ = orient(points, np.array([[apex[redo[0]], *own[k]] for k in keep]))
             worst = min(shape_quality(*points[row]) for row in new)
             if worst > 0 and (best is None or worst > best[0]):
                 best = (worst, [across[k] for k in redo], new)
         if best is not None:
-            gone[best[1]] = True
+            gone[[t, *best[1]]] = taken[best[1]] = True
             added.append(best[2])
     return np.concatenate([tets[~gone], *added]) if added else tets[~gone]
 
@@ -200,6 +203,11 @@ def _is_flat(points, tet):
     dx, dy, dz = points[tet[3], 0] - a[0], points[tet[3], 1] - a[1], points[tet[3], 2] - a[2]
     six_volume = bx * (cy * dz - cz * dy) + by * (cz * dx - cx * dz) + bz * (cx * dy - cy * dx)
     return abs(six_volume) <= FLAT * (bx * bx + by * by + bz * bz) ** 1.5
+
+
+def flat_tets(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """(m,) whether each of ``tets`` (m, 4) is flat: |6 x volume| at most FLAT x (its first edge's length)^3."""
+    return _flat(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(tets, dtype=np.int64))
 
 
 @numba.njit(cache=True)
