@@ -378,6 +378,25 @@ def test_a_flat_tet_between_no_pyramids_is_swapped_out_not_dropped():
     assert {tuple(sorted(f)) for f in mesh.boundary_faces().tolist()} == outer
 
 
+def test_two_curves_between_the_same_corners_a_hair_apart_are_one_chain():
+    """A patch collapsed between two curves 0.017 mm apart (a drafted housing's sliver of fillet) left the surface
+    open along one of them at h 0.8; the later curve now takes the earlier one's nodes, reversed to its own
+    direction, so the patches outside meet on one chain. Curves 0.3 mm apart (wider than 0.1 h) keep their own."""
+    from types import SimpleNamespace
+
+    from engine.meshing.surface import _coincident
+
+    line = np.array([[0.0, 0.0, 0.0], [0.7, 0.0, 0.0], [1.4, 0.0, 0.0]])
+    bent = line + [[0, 0, 0], [0, 0.017, 0], [0, 0, 0]]
+    wide = line + [[0, 0, 0], [0, 0.3, 0], [0, 0, 0]]
+    packing = SimpleNamespace(radius=np.full(6, 0.4))  # h 0.8
+    for second, merged in ((bent, True), (wide, False)):
+        features = SimpleNamespace(curves=[SimpleNamespace(closed=False, polyline=p) for p in (line, second[::-1])])
+        chains = _coincident(packing, features, {0: np.array([0, 2, 1]), 1: np.array([1, 3, 0])})
+        assert chains[0].tolist() == [0, 2, 1]
+        assert chains[1].tolist() == ([1, 2, 0] if merged else [1, 3, 0])
+
+
 def test_a_flat_cap_gets_a_node_beneath_it():
     """A flat tet under a roof of two boundary faces (16 deg, a fold on a convex patch: no swap of its ring
     helps) becomes, with the ring around its inner edge, the star of one new node beneath: every tet

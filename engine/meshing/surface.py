@@ -31,6 +31,7 @@ SEAM_LAYERS = 4  # node layers copied across the seam of a full cylinder (Delaun
 SEAM_TRIES = 4  # seams tried on a full cylinder, each SEAM_SHIFT of a turn on from the last
 SEAM_SHIFT = 0.381966
 CROWDING = 0.25  # a patch node nearer than this x h to its patch's border is left out, ...
+COINCIDENT = 0.1  # x h: two open curves between the same corners this near all along are one chain (as SHORT_CURVE)
 SPLIT_ROUNDS = 8  # rounds of splitting chain edges the Delaunay triangulation misses
 CONSTRAINED_AFTER = 3  # ... after which a patch that still misses some is triangulated with them constrained
 HOLE = 1.0  # a surface triangle whose circumradius exceeds this x h marks a missing bubble, ...
@@ -58,7 +59,9 @@ class BoundaryTriangulation:
 def curve_chains(packing, features) -> dict[int, np.ndarray]:
     """Node indices of every surface curve, in arc-length order, its end corners included.
 
-    A closed curve's chain does not repeat its first node.
+    A closed curve's chain does not repeat its first node. An open curve that joins the same two corner nodes
+    as a curve before it and lies within COINCIDENT x h of it all along takes that curve's nodes
+    (:func:`_coincident`).
     """
     corner_node = _corner_nodes(packing, features)
     corner_at_vertex = {c.vertex: corner_node[k] for k, c in enumerate(features.corners) if corner_node[k] >= 0}
@@ -74,7 +77,47 @@ def curve_chains(packing, features) -> dict[int, np.ndarray]:
         end = None if curve.closed else corner_at_vertex.get(int(curve.vertices[-1]))
         chain = np.concatenate([[start] if start is not None else [], ordered, [end] if end is not None else []])
         chains[index] = chain[np.diff(chain, prepend=-1) != 0].astype(np.int64)  # a short curve's ends: one node
+    return _coincident(packing, features, chains)
+
+
+def _coincident(packing, features, chains: dict) -> dict:
+    """``chains`` with an open curve that runs between the same two corner nodes as an earlier one, within
+    COINCIDENT x h of it all along (both ways, h the smallest at their nodes), given the earlier one's nodes.
+
+    The patch between two such curves has collapsed: on a drafted housing's STL two smoothed cuts run 0.017 mm
+    apart round a 2 mm^2 piece of fillet (4 facets), each got a node of its own at h 0.8, and the piece's own
+    nodes lay beyond both in its chart: it kept triangles on one chain's side only, and the surface was left
+    open along the other (both fillet recipes refused the part). With one chain the piece has no area (its
+    border runs both ways: no side), its nodes go to the patch across (``_across_smooth_cuts``), and the two
+    patches outside meet on the one chain."""
+    by_ends: dict = {}
+    for index, chain in chains.items():
+        if not features.curves[index].closed and len(chain) >= 2 and chain[0] != chain[-1]:
+            by_ends.setdefault(frozenset((int(chain[0]), int(chain[-1]))), []).append(index)
+    for group in by_ends.values():
+        for k, index in enumerate(group[1:], start=1):
+            for earlier in group[:k]:
+                chain, other = chains[index], chains[earlier]
+                h = 2 * packing.radius[np.concatenate([chain, other])].min()
+                if (
+                    _polyline_distance(features.curves[index].polyline, features.curves[earlier].polyline)
+                    < COINCIDENT * h
+                ):
+                    chains[index] = other if other[0] == chain[0] else other[::-1]
+                    break
     return chains
+
+
+def _polyline_distance(a: np.ndarray, b: np.ndarray, samples: int = 64) -> float:
+    """Two-sided Hausdorff distance between polylines (k, 3) and (l, 3), from ``samples`` points along each."""
+
+    def along(line):
+        length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+        at = np.linspace(0.0, length[-1], samples)
+        return np.column_stack([np.interp(at, length, line[:, k]) for k in range(3)])
+
+    a, b = along(a), along(b)
+    return max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max())
 
 
 def _corner_nodes(packing, features) -> np.ndarray:
