@@ -59,3 +59,28 @@ def test_recipe_meshes_its_shape_and_refines_at_the_feature(tmp_path, recipe, bu
     near = lengths[distance < 0.5 * size].mean()
     far = lengths[distance > 4 * size].mean()
     assert near < 0.6 * far, f"near {near:.3g} vs far {far:.3g}"
+
+
+def test_static_stress_refines_a_fillet_by_its_radius():
+    """A filleted inner corner is a stress raiser: static-stress puts the fillet pattern's size (0.2 x the radius)
+    on it, finer than the 24-per-circle curvature rule alone (2 pi r / 24 = 0.26 r: 2.1 mm here)."""
+    import logging
+
+    from scipy.spatial import cKDTree
+
+    from engine.job import job_from_dict
+    from engine.pipeline import run
+
+    logging.disable(logging.WARNING)
+    try:
+        job = {"geometry": {"shape": "l_bracket", "parameters": {"fillet_radius": 8.0}}, "size": 6.0}
+        result = run(job_from_dict({**job, "recipe": "static-stress"}, source="<test>"), write=False)
+    finally:
+        logging.disable(logging.NOTSET)
+    mesh = result.mesh
+    pairs = np.unique(np.sort(mesh.tets[:, [[i, j] for i in range(4) for j in range(i + 1, 4)]].reshape(-1, 2)), axis=0)
+    lengths = np.linalg.norm(np.diff(mesh.points[pairs], axis=1)[:, 0], axis=1)
+    (fillet, *_) = result.features.named("fillet")
+    distance, _ = cKDTree(fillet.vertices).query(mesh.points[pairs].mean(axis=1))
+    on_fillet = np.median(lengths[distance < 1.0])  # 1.49 (the curvature rule alone: 1.84)
+    assert 0.7 * 1.6 < on_fillet < 1.05 * 1.6, f"median edge on the fillet {on_fillet:.3g}, the pattern asks 1.6"
