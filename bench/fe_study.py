@@ -9,10 +9,10 @@ isoparametric 10-node tets in scikit-fem, CG + smoothed-aggregation AMG, average
 * ``uniform`` - fuzzymesh, the base pattern alone at s x the default size H (model diagonal / 40),
   without the always-placed rules (engine/validation/study-sizing.yaml), as the existing study.
 * ``gmsh``    - Gmsh 4 (OpenCASCADE geometry, order 2, high-order nodes on the exact surfaces) with a
-  Distance field on the same feature (the hole wall; the sphere's inner surface) and a Threshold
-  field: SizeMin = the recipe's near size, SizeMax = the recipe's far size (capped at H), growing
-  linearly over the same extent (DistMin 0, DistMax = extent); every size times s. The sphere has no
-  recipe pattern: its field goes from 0.5 H at the inner surface to H over half the wall.
+  Distance field on the same feature (the hole wall; the bracket's fillet; the sphere's inner surface) and
+  a Threshold field: SizeMin = the recipe's near size, SizeMax = the recipe's far size (capped at H),
+  growing linearly over the same extent (DistMin 0, DistMax = extent); every size times s. The sphere has
+  no recipe pattern: its field goes from 0.5 H at the inner surface to H over half the wall.
 
 Every series goes through one code path: (points, 10-node tets) -> :class:`FEModel` (boundary
 facets and boundary conditions found geometrically, the same for every mesher) -> stiffness, solve,
@@ -21,15 +21,18 @@ nodal stress (engine.validation.elasticity). The fuzzymesh 10-node meshes are ex
 
 Quantities: plates - the through-thickness mean of sigma_xx at the hole root(s) (both roots for a
 central hole, divided by the net-section nominal stress: Peterson's Kt_n; the root next to the plate
-edge for the edge hole, divided by the applied traction); sphere - the hoop stress at r = a, mean of
-the inner nodes and worst node, against Lame.  References: a very fine Gmsh distance-field run of
-each plate, computed once (``--reference``) and stored in bench/fe_reference.json next to
-Peterson's value; Lame for the sphere.
+edge for the edge hole, divided by the applied traction); the filleted L-bracket (end of its base leg
+clamped, a shear traction on the top of its upright that opens the inner corner) - the peak over the
+fillet's arc of the across-the-width mean of the stress along the arc, divided by the upright's nominal
+bending stress at the base leg's top face; sphere - the hoop stress at r = a, mean of the inner nodes and
+worst node, against Lame.  References: a very fine Gmsh distance-field run of each plate and of the
+bracket, computed once (``--reference``) and stored in bench/fe_reference.json (next to Peterson's value
+for a plate); Lame for the sphere.
 
     python bench/fe_study.py --reference --reference-scale 0.6     # the fine runs (once)
     python bench/fe_study.py --seeds 0 1 --scales "recipe=6,5,4,3,2,1.5;uniform=3,2,1.5,1;gmsh=6,5,4,3,2,1.5" \
         --cases ...                                  # appends every mesh to bench/fe_study_rows.jsonl
-    python bench/fe_study.py --cases --out bench/fe_study          # tables of --tag's rows -> .json / .md
+    python bench/fe_study.py --cases --out bench/fe_study --tag A B   # tables of the tags' rows -> .json / .md
     python bench/fe_study.py --series recipe --extent 2 --tag extent-2 ...   # a variant of the hole pattern
 
 A mesh is counted as reaching a target from the node count where the |error| of every seed stays within
@@ -64,7 +67,9 @@ from engine.validation.sphere import lame  # noqa: E402
 MATERIAL = Material(E=200e3, nu=0.3)
 TENSION = 100.0
 PRESSURE = 100.0
-SAMPLES = 101  # heights along a root line for the through-thickness mean
+SAMPLES = 101  # heights along a root line for the through-thickness mean (widths across the bracket's fillet)
+UNSOLVED = 1e-6  # relative residual above which a solve is a failed data point, not a value
+ARC_SAMPLES = 181  # angles round the bracket's fillet where its peak is sought
 KNOWLEDGE = ROOT / "knowledge"
 PATTERNS = ROOT / "patterns"
 RECIPE = "static-stress"
@@ -73,6 +78,7 @@ RECIPE = "static-stress"
 # volume_change) multiplies by s^2; sizes in units of H scale with the job's size.
 SCALED = {
     "hole": {"near": 1, "far": 1},
+    "fillet": {"near": 1, "far": 1},
     "thin-wall": {"through": -1},
     "narrow-gap": {"across": -1},
     "narrow-face": {"stretch": 1},
@@ -90,7 +96,11 @@ def _defaults(pattern: str) -> dict:
     return {k: v["default"] for k, v in _yaml(PATTERNS / f"{pattern}.yaml").get("parameters", {}).items()}
 
 
-HOLE = {k: _defaults("hole")[k] for k in ("near", "far", "extent")}  # patterns/hole.yaml (times the radius)
+def _sizes(pattern: str) -> dict:
+    """A stress-raiser pattern's near / far / extent defaults (times the feature's radius)."""
+    return {k: _defaults(pattern)[k] for k in ("near", "far", "extent")}
+
+
 REFERENCE_FILE = Path(__file__).with_name("fe_reference.json")
 
 
@@ -99,17 +109,29 @@ class Case:
     name: str
     shape: str
     parameters: dict
-    kind: str  # "plate" or "sphere"
+    kind: str  # "plate", "bracket" or "sphere"
     roots: tuple = (90.0, -90.0)  # root angles (degrees from +x) for a plate
     nominal: str = "net"  # "net" (Peterson) or "gross"
     note: str = ""
-    hole: dict = field(default_factory=lambda: dict(HOLE))
+    pattern: str | None = "hole"  # the recipe's pattern on the stress raiser, whose sizes the Gmsh field takes
+    sizes: dict = field(default_factory=dict)  # its near / far / extent (times the radius): the YAML's unless set
+
+    def __post_init__(self):
+        if self.pattern and not self.sizes:
+            self.sizes = _sizes(self.pattern)
+
+    @property
+    def radius(self) -> float:
+        """The stress raiser's radius, the pattern's length L."""
+        return self.parameters["hole_radius" if self.kind == "plate" else "fillet_radius"]
 
     @property
     def diagonal(self) -> float:
         p = self.parameters
         if self.kind == "sphere":
             return float(np.linalg.norm([p["outer_radius"]] * 3))
+        if self.kind == "bracket":
+            return float(np.linalg.norm([p["leg_length"], p["leg_height"], p["width"]]))
         return float(np.linalg.norm([p["length"], p["width"], p["thickness"]]))
 
     @property
@@ -143,10 +165,20 @@ CASES = {
             note="r 10 at y = 30 of W 100: ligament 10 to the edge; root next to the edge, sigma / S",
         ),
         Case(
+            "filleted bracket",
+            "l_bracket",
+            dict(leg_length=80.0, leg_height=80.0, thickness=15.0, width=40.0, fillet_radius=4.0),
+            "bracket",
+            nominal="bending",
+            pattern="fillet",
+            note="L-bracket, fillet r 4 (r / t 0.27) in its inner corner, base end clamped, shear on the upright's top",
+        ),
+        Case(
             "sphere",
             "hollow_sphere_octant",
             dict(inner_radius=50.0, outer_radius=100.0),
             "sphere",
+            pattern=None,
             note="Lame, hoop stress at r = a",
         ),
     ]
@@ -228,7 +260,7 @@ def solve_plate(case: Case, model: FEModel) -> dict:
         values = p2_triangle_values(corners, sxx[wall[near]], np.column_stack([np.zeros(len(z)), z]))
         means.append(values @ weights / weights.sum())
     nominal = TENSION * W / (W - 2 * R) if case.nominal == "net" else TENSION
-    return {"value": float(np.mean(means) / nominal), "iterations": info["iterations"]}
+    return {"value": float(np.mean(means) / nominal), "iterations": info["iterations"], "residual": info["residual"]}
 
 
 def solve_sphere(case: Case, model: FEModel) -> dict:
@@ -255,17 +287,77 @@ def solve_sphere(case: Case, model: FEModel) -> dict:
         "value": float(1 + deviation.mean()),
         "worst": float(1 + deviation[np.argmax(np.abs(deviation))]),
         "iterations": info["iterations"],
+        "residual": info["residual"],
+    }
+
+
+def solve_bracket(case: Case, model: FEModel) -> dict:
+    """The filleted L-bracket: the end face of the base leg clamped, a shear traction -TENSION / 10 along x on
+    the upright's top face (it opens the inner corner: the fillet in tension); the value is the peak over the
+    fillet's arc of the across-the-width mean of the stress along the profile (sigma_tt, from the P2
+    interpolation of the averaged nodal stresses on the 6-node boundary triangles of the fillet and of the two
+    faces it is tangent to, developed flat: arc length along the profile x width; ARC_SAMPLES angles x SAMPLES
+    widths), divided by the upright's nominal bending stress at the base leg's top face, 6 M / (w t^2)."""
+    p = case.parameters
+    L, top, t, w, r = p["leg_length"], p["leg_height"], p["thickness"], p["width"], p["fillet_radius"]
+    tol = 1e-6 * L
+    traction = TENSION / 10
+    K = stiffness(model, MATERIAL)
+    loaded = model.facets(lambda x: np.abs(x[2] - top) < tol)
+    f = _load(model, loaded, lambda n: (-traction + 0 * n[0], 0 * n[0], 0 * n[0]))
+    clamped = np.unique(model.triangles(lambda x: np.abs(x[0] - L) < tol))
+    u, info = solve(model, K, f, np.concatenate([model.dofs(clamped, k) for k in range(3)]))
+    stress = nodal_stress(model, u, MATERIAL)
+    axis = t + r  # the fillet's axis at x = z = t + r, along y
+
+    def developed(x):
+        """(n,) arc length along the profile (upright face, fillet, base face) and (n, 3) its direction."""
+        angle = np.mod(np.arctan2(x[:, 2] - axis, x[:, 0] - axis), 2 * np.pi)  # pi .. 3 pi / 2 on the fillet
+        up, base = x[:, 2] > axis, x[:, 0] > axis
+        along = np.where(up, np.pi * r - (x[:, 2] - axis), np.where(base, 1.5 * np.pi * r + x[:, 0] - axis, angle * r))
+        direction = np.stack([-np.sin(angle), 0 * angle, np.cos(angle)], axis=1)
+        direction[up], direction[base] = (0.0, 0.0, -1.0), (1.0, 0.0, 0.0)
+        return along, direction
+
+    def beside(x):  # (n,) on the fillet or on a face it is tangent to, within 2 r of it
+        on_fillet = (
+            (np.abs(np.hypot(x[0] - axis, x[2] - axis) - r) < 1e-4 * r) & (x[0] < axis + tol) & (x[2] < axis + tol)
+        )
+        upright = (np.abs(x[0] - t) < tol) & (x[2] > axis - tol) & (x[2] < axis + 2 * r)
+        base = (np.abs(x[2] - t) < tol) & (x[0] > axis - tol) & (x[0] < axis + 2 * r)
+        return on_fillet | upright | base
+
+    faces = model.triangles(beside)
+    along, direction = developed(model.points[faces].reshape(-1, 3))
+    along, direction = along.reshape(faces.shape), direction.reshape(*faces.shape, 3)
+    s_tt = np.einsum("kni,knij,knj->kn", direction, stress[faces], direction)
+    arc = np.linspace(np.pi, 1.5 * np.pi, ARC_SAMPLES)
+    y = np.linspace(-w / 2, w / 2, SAMPLES)
+    grid = np.stack(np.meshgrid(arc * r, y, indexing="ij"), axis=-1).reshape(-1, 2)
+    corners = np.stack([along[:, :3], model.points[faces[:, :3], 1]], axis=-1)
+    values = p2_triangle_values(corners, s_tt, grid).reshape(len(arc), len(y))
+    weights = np.gradient(y)
+    weights[[0, -1]] /= 2
+    mean = values @ weights / weights.sum()
+    nominal = 6 * traction * t * w * (top - t) / (w * t * t)
+    peak = int(np.argmax(mean))
+    return {
+        "value": float(mean[peak] / nominal),
+        "angle": float(np.degrees(arc[peak])),
+        "iterations": info["iterations"],
+        "residual": info["residual"],
     }
 
 
 def solve_case(case: Case, model: FEModel) -> dict:
-    return solve_plate(case, model) if case.kind == "plate" else solve_sphere(case, model)
+    solver = {"plate": solve_plate, "bracket": solve_bracket, "sphere": solve_sphere}[case.kind]
+    return solver(case, model)
 
 
 # ---------------------------------------------------------------------------------------------- meshes
 def recipe_placements(case: Case, scale: float) -> list[dict]:
     """The shipped recipe's placements and the always-placed rules of knowledge/sizing.yaml, every size they ask
-    for times ``scale`` (SCALED); the hole pattern's near / far / extent from case.hole (the YAML's unless a
+    for times ``scale`` (SCALED); the case's pattern's near / far / extent from case.sizes (the YAML's unless a
     variant sets them)."""
     place = [dict(p) for p in _yaml(KNOWLEDGE / "recipes" / f"{RECIPE}.yaml")["place"]]
     placed = {p["pattern"] for p in place}
@@ -277,8 +369,8 @@ def recipe_placements(case: Case, scale: float) -> list[dict]:
     out = []
     for p in place:
         parameters = {**_defaults(p["pattern"]), **p.get("parameters", {})}
-        if p["pattern"] == "hole":
-            parameters.update(case.hole)
+        if p["pattern"] == case.pattern:
+            parameters.update(case.sizes)
         for key, power in SCALED.get(p["pattern"], {}).items():
             parameters[key] = parameters[key] * scale**power
         out.append({k: v for k, v in {**p, "parameters": parameters}.items() if k != "id"})
@@ -317,13 +409,38 @@ def fuzzymesh_model(case: Case, series: str, scale: float, seed: int, fixed_grad
     }
     if series == "recipe":
         data["knowledge"] = [str(scaled_sizing(scale, fixed_gradation))]
-        data["place"] = [p for p in recipe_placements(case, scale) if case.kind == "plate" or p["pattern"] != "hole"]
+        data["place"] = recipe_placements(case, scale)
     else:
         data["knowledge"] = [str(STUDY_SIZING)]
         data["place"] = [{"pattern": "uniform-domain"}]
     result = mesh_job(job_from_dict(data, source="<fe_study>"), write=False)
     points, tets10, _ = quadratic(result.mesh, result.geometry, result.features)
     return FEModel(points, tets10, len(result.mesh.points))
+
+
+def _bracket(occ, p: dict) -> int:
+    """engine.shapes.l_bracket's solid in OpenCASCADE (its x-z profile with the fillet's arc, extruded along y over
+    the width, centred); returns the fillet's surface tag."""
+    import gmsh
+
+    L, top, t, w, r = p["leg_length"], p["leg_height"], p["thickness"], p["width"], p["fillet_radius"]
+    y = -w / 2
+    corners = [(0, 0), (L, 0), (L, t), (t + r, t), (t, t + r), (t, top), (0, top)]
+    points = [occ.addPoint(x, y, z) for x, z in corners]
+    centre = occ.addPoint(t + r, y, t + r)
+    sides = [
+        occ.addLine(points[k], points[k + 1]) if k != 3 else occ.addCircleArc(points[3], centre, points[4])
+        for k in range(6)
+    ] + [occ.addLine(points[6], points[0])]
+    occ.extrude([(2, occ.addPlaneSurface([occ.addCurveLoop(sides)]))], 0, w, 0)
+    occ.synchronize()
+    box = np.array([t, t, t + r, t + r])  # the fillet's x and z extent
+    (fillet,) = [
+        s
+        for _, s in gmsh.model.getEntities(2)
+        if np.allclose(np.take(gmsh.model.getBoundingBox(2, s), [0, 2, 3, 5]), box, atol=1e-6 * L)
+    ]
+    return fillet
 
 
 GMSH_TO_VTK = [0, 1, 2, 3, 4, 5, 6, 7, 9, 8]  # gmsh tet10: edges 01 12 20 30 32 31 -> VTK 01 12 02 03 13 23
@@ -348,7 +465,8 @@ def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
             occ.cut([(3, box)], [(3, cyl)])
             occ.synchronize()
             feature = [s for _, s in gmsh.model.getEntities(2) if gmsh.model.getType(2, s) == "Cylinder"]
-            near, far, extent = (case.hole["near"] * R, min(case.hole["far"] * R, case.H), case.hole["extent"] * R)
+        elif case.kind == "bracket":
+            feature = [_bracket(occ, p)]
         else:
             a, b = p["inner_radius"], p["outer_radius"]
             outer, inner = occ.addSphere(0, 0, 0, b), occ.addSphere(0, 0, 0, a)
@@ -362,6 +480,9 @@ def gmsh_model(case: Case, scale: float, seed: int = 0) -> FEModel:
                 if gmsh.model.getType(2, s) == "Sphere" and max(gmsh.model.getBoundingBox(2, s)[3:]) < a * 1.01
             ]
             near, far, extent = 0.5 * case.H, case.H, (b - a) / 2
+        if case.pattern:
+            sizes, R = case.sizes, case.radius
+            near, far, extent = sizes["near"] * R, min(sizes["far"] * R, case.H), sizes["extent"] * R
         assert feature, "no feature surface found"
         fields = gmsh.model.mesh.field
         d = fields.add("Distance")
@@ -408,6 +529,8 @@ def measure(case: Case, series: str, scale: float, seed: int = 0, fixed_gradatio
         model = fuzzymesh_model(case, series, scale, seed, fixed_gradation)
     meshed = time.perf_counter() - start
     solved = solve_case(case, model)
+    if not solved["residual"] <= UNSOLVED:  # once, under load: CG + AMG ran 1,000 steps to 2e20 (not reproduced)
+        raise RuntimeError(f"the solver did not converge: relative residual {solved['residual']:.3g}")
     return {
         "case": case.name,
         "series": series,
@@ -506,7 +629,9 @@ def markdown(study: dict) -> str:
         + ", ".join(map(str, study["seeds"]))
         + " for fuzzymesh, "
         + ", ".join(map(str, study.get("gmsh_seeds", [0])))
-        + " for Gmsh (its Mesh.RandomSeed; means over the seeds).",
+        + " for Gmsh (its Mesh.RandomSeed; means over the seeds). Rows (bench/fe_study_rows.jsonl) of the tags "
+        + ", ".join(f"`{t}`" for t in study["tags"])
+        + " (a geometry's series from the first that has it).",
         "",
         "## Nodes from which the error of every seed stays within 1 % and 3 %",
         "",
@@ -580,7 +705,7 @@ def main(argv=None) -> None:
     parser.add_argument("--series", nargs="*", default=["recipe", "uniform", "gmsh"])
     parser.add_argument("--seeds", type=int, nargs="*", default=[0])
     parser.add_argument("--scales", type=str, default="", help="series=s1,s2;series=... overrides SCALES")
-    parser.add_argument("--near", type=float, default=None, help="the hole pattern's near (times r) for the recipe")
+    parser.add_argument("--near", type=float, default=None, help="the case pattern's near (times r) for the recipe")
     parser.add_argument("--extent", type=float, default=None)
     parser.add_argument("--far", type=float, default=None)
     parser.add_argument(
@@ -594,17 +719,20 @@ def main(argv=None) -> None:
         action="store_true",
         help="the recipe series keeps the shipped gradation at every scale (not s times the recipe's field)",
     )
-    parser.add_argument("--tag", default="shipped", help="label of this run's rows (e.g. a tuned variant)")
-    parser.add_argument("--out", type=Path, default=None, help="write OUT.json / OUT.md from the rows of --tag")
     parser.add_argument(
-        "--compare-tag", default=None, help="with --out: the series --tag has no rows of (gmsh, uniform) from this tag"
+        "--tag",
+        nargs="+",
+        default=["shipped"],
+        help="label of this run's rows (e.g. a tuned variant); with --out, the tags whose rows to tabulate: a "
+        "(geometry, series) from the first tag that has rows of it",
     )
+    parser.add_argument("--out", type=Path, default=None, help="write OUT.json / OUT.md from the rows of --tag")
     args = parser.parse_args(argv)
     stored = json.loads(REFERENCE_FILE.read_text()) if REFERENCE_FILE.exists() else {}
     if args.reference:
         for name in args.cases:
             case = CASES[name]
-            if case.kind != "plate" or name in stored:
+            if case.kind == "sphere" or name in stored:
                 continue
             row = measure(case, "gmsh", args.reference_scale)
             p = case.parameters
@@ -629,8 +757,8 @@ def main(argv=None) -> None:
     for name in args.cases:
         case = CASES[name]
         for key in ("near", "far", "extent"):
-            if getattr(args, key) is not None:
-                case.hole[key] = getattr(args, key)
+            if getattr(args, key) is not None and case.pattern:
+                case.sizes[key] = getattr(args, key)
         for series in args.series:
             for scale in scales[series]:
                 for seed in args.seeds:
@@ -638,26 +766,28 @@ def main(argv=None) -> None:
                         row = measure(case, series, scale, seed, args.fixed_gradation)
                     except Exception as error:  # a refused or failed mesh is a data point too
                         row = {"case": name, "series": series, "scale": scale, "seed": seed, "failed": str(error)[:200]}
-                    row["tag"] = args.tag
-                    row["hole"] = dict(case.hole)
+                    row["tag"] = args.tag[0]
+                    row["sizes"] = dict(case.sizes)
                     row["gradation"] = "fixed" if args.fixed_gradation else "scaled"
                     with args.rows.open("a") as f:
                         f.write(json.dumps(row) + "\n")
                     print(json.dumps(row), flush=True)
     if args.out:
-        write(args.rows, args.tag, args.out, stored, args.compare_tag)
+        write(args.rows, args.tag, args.out, stored)
 
 
-def write(rows_path: Path, tag: str, out: Path, stored: dict, compare_tag: str | None = None) -> None:
+def write(rows_path: Path, tags: list[str], out: Path, stored: dict) -> None:
+    """OUT.json / OUT.md from the rows of ``tags``: each (geometry, series) from the first tag with rows of it."""
     every = [json.loads(line) for line in rows_path.read_text().splitlines() if line.strip()]
-    rows = [r for r in every if r.get("tag") == tag]
-    if compare_tag:
-        own = {(r["case"], r["series"]) for r in rows}
-        rows += [r for r in every if r.get("tag") == compare_tag and (r["case"], r["series"]) not in own]
+    rows, taken = [], set()
+    for tag in tags:
+        own = [r for r in every if r.get("tag") == tag and (r["case"], r["series"]) not in taken]
+        taken |= {(r["case"], r["series"]) for r in own}
+        rows += own
     failures = [r for r in rows if "failed" in r]
     rows = [r for r in rows if "failed" not in r]
     study = {
-        "tag": tag,
+        "tags": tags,
         "seeds": sorted({r["seed"] for r in rows if r["series"] != "gmsh"}),
         "gmsh_seeds": sorted({r["seed"] for r in rows if r["series"] == "gmsh"}),
         "references": stored,
