@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 RESTORE_ROUNDS = 4  # rounds of putting back slid nodes whose tets turned non-positive
 SURFACE_TOLERANCE = 0.05  # x h: how far from the input surface a peel or collapse may put boundary faces
 REPAIR_ROUNDS = 4  # rounds of peels, collapses and swaps of what is still under the floor
-FLAT_QUALITY = 1e-6  # quality under which the swaps take a flat tet tetra.unfold_flat left (and any as flat)
+FLAT_QUALITY = 1e-6  # quality under which a tet is flat for the swaps that take out what unfold_flat left
 
 
 @register_mesher("delaunay")
