@@ -9,7 +9,7 @@
 3. IN/OUT: regions of tets between the boundary triangles are classified by
    the side of the triangles they touch (exact, see ``tetra.inside_by_boundary``);
    a flat tet inside is unfolded (``tetra.unfold_flat``), or, where its sides
-   are no pyramids, swapped out (``improve.swap_bad_faces``).
+   are no pyramids, swapped out (``improve.swap_bad_faces``), else dropped.
 4. Quality improvement (``improve.py``): boundary nodes move only in the
    last relocation pass (sliding on the surface and put back onto it); flat
    caps get a node beneath them (tagged ``steiner``); what is still under
@@ -90,8 +90,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
     hull_tets = len(tets)
     tets = unfold_flat(points, tets[inside_by_boundary(points, tets, boundary)])
     tets = canonical(orient(points, tets)[0])  # Gmsh's order varies from run to run
-    if flat_tets(points, tets).any():  # one unfold_flat could not unfold: swapped out before anything else
+    if flat_tets(points, tets).any():  # one unfold_flat could not unfold: swapped out before anything else,
         tets = canonical(orient(points, swap_bad_faces(points, tets, FLAT_QUALITY)[0])[0])
+        tets = tets[~flat_tets(points, tets)]  # else dropped (a pillow block's, no swap taking it, as before)
     seconds["connect"] = time.perf_counter() - start
 
     start = time.perf_counter()

@@ -162,7 +162,7 @@ def unfold_flat(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     whose apex sees the quad from one side is re-split by the other side's diagonal, whichever of the two
     re-splits leaves the better worst tet. A flat tet whose sides are not two such pyramids (each side's two
     triangles in tets of different apexes: a rectangle through a 10 mm ligament, rim to plate edge, at h 11)
-    stays, for the mesher's swaps to take out (``improve.swap_bad_faces``): dropping it left the same hole.
+    stays, for the mesher's swaps to take out (``improve.swap_bad_faces``; dropping it left the same hole there).
     """
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     flat = np.flatnonzero(flat_tets(points, tets))
