@@ -562,5 +562,42 @@ def test_a_patch_node_slid_off_its_patch_or_to_poorer_tets_is_put_back(built):
         slid = points.copy()
         slid[4] = after
         landed = features.face_patch[shape.geometry.closest_point(slid[[4]])[2]]
-        out = _on_own_patches(slid, points, np.array([4]), landed, level, entity, tets)
+        no_faces, h = np.zeros((0, 3), np.int64), np.full(len(points), 1.0)
+        out = _on_own_patches(slid, points, np.array([4]), landed, level, entity, tets, no_faces, shape.geometry, h)
         assert np.array_equal(out[4], after if kept else points[4])
+
+
+def test_a_patch_node_slid_so_that_its_triangle_strays_off_the_surface_is_put_back(built):
+    """Beside a centre hole's cone tip two slid nodes left a boundary triangle spanning the tip 0.28 h off the
+    surface (the mesh refused). On a cylinder r 25: a triangle's third node slid from 0 to 40 deg round the axis
+    leaves its centroid 1.40 off the surface (0.06 before): over 0.06 h (h 10), so it goes back; the same slide
+    with h 100 (0.06 h = 6) stays."""
+    from engine.meshing.delaunay import _on_own_patches
+
+    shape, features = built("cylinder", radius=25.0, height=100.0)
+    (side,) = [k for k, p in enumerate(features.patches) if "side" in p.names]
+
+    def at(degrees, z):
+        return [25 * np.cos(np.radians(degrees)), 25 * np.sin(np.radians(degrees)), z]
+
+    points = np.array([at(-5, 50), at(5, 50), at(0, 55)])
+    level = np.full(3, PATCH, np.int8)
+    entity = np.full(3, side)
+    slid = points.copy()
+    slid[2] = at(40, 55)
+    landed = np.array([side])
+    faces = np.array([[0, 1, 2]])
+    for h, kept in ((10.0, False), (100.0, True)):
+        out = _on_own_patches(
+            slid.copy(),
+            points,
+            np.array([2]),
+            landed,
+            level,
+            entity,
+            np.zeros((0, 4), np.int64),
+            faces,
+            shape.geometry,
+            np.full(3, h),
+        )
+        assert np.array_equal(out[2], slid[2] if kept else points[2])

@@ -41,7 +41,7 @@ from .improve import (
     relocate,
     swap_bad_faces,
 )
-from .surface import check_closed, triangulate_boundary
+from .surface import DEVIATION, check_closed, triangulate_boundary
 from .tetra import canonical, compact, flat_tets, inside_by_boundary, orient, tetrahedralize, unfold_flat
 
 log = logging.getLogger(__name__)
@@ -103,6 +103,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
     held = np.concatenate([held[nodes], np.zeros(len(steiner), bool)])
     slide[0][held] = slide[1][held] = np.nan
     surface_node = np.nan_to_num(slide[1]).any(axis=1)  # patch and smooth-cut nodes: they slide on the surface
+    node_h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])
     points, moves = relocate(points, tets, slide[0], seed)
     if (quality_below(points, tets, TARGET)).any():  # last pass: curved-patch nodes slide too
         unslid = points
@@ -111,7 +112,9 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
         points[slid], _, face = geometry.closest_point(points[slid])  # back onto the surface
-        points = _on_own_patches(points, unslid, slid, features.face_patch[face], level, entity, tets)
+        points = _on_own_patches(
+            points, unslid, slid, features.face_patch[face], level, entity, tets, boundary, geometry, node_h
+        )
         points = _positive(points, unslid, tets, np.flatnonzero(moved))
     points, tets, capped = fill_flat_caps(points, tets, boundary, TARGET)
     if capped:  # nodes beneath flat caps: the mesher's own, free like Steiner nodes
@@ -276,13 +279,16 @@ def _on_surface(geometry):
     return at
 
 
-def _on_own_patches(points, before, slid, landed, level, entity, tets) -> np.ndarray:
+def _on_own_patches(points, before, slid, landed, level, entity, tets, boundary, geometry, h) -> np.ndarray:
     """``points`` with the ``slid`` patch nodes put back where ``before`` has them when the slide, once put back
     onto the surface (on the patch ``landed``, per slid node), took them off their own patch (past a feature
-    curve) or left their tets' smallest dihedral angle lower than before the slide (all of them; node by node,
-    with the other nodes slid, the gear below kept 9.5 deg): relocation weighed the tets with the node off the
-    surface. A gear's flank node slid 1.1 h along the flank past its foot onto the root (a 7.6 deg tet), another
-    to 0.07 h from the foot's curve (5.3 deg)."""
+    curve), left their tets' smallest dihedral angle lower than before the slide (all of them; node by node,
+    with the other nodes slid, the gear below kept 9.5 deg), or left one of their ``boundary`` triangles'
+    centroids further from the input surface than before and than surface.DEVIATION x the smallest ``h`` (n,)
+    of its nodes, the chord the surface triangulation itself allows: relocation weighed the tets with the node
+    off the surface. A gear's flank node slid 1.1 h along the flank past its foot onto the root (a 7.6 deg
+    tet), another to 0.07 h from the foot's curve (5.3 deg); beside a centre hole's cone tip two nodes slid
+    so that a triangle spanned the tip 0.28 h off the surface (the mesh refused)."""
     on_patch = level[slid] == PATCH
     patch_node = slid[on_patch]
     astray = patch_node[landed[on_patch] != entity[patch_node]]
@@ -291,7 +297,12 @@ def _on_own_patches(points, before, slid, landed, level, entity, tets) -> np.nda
     np.minimum.at(star_before, star, min_dihedrals(before, star)[:, None])
     np.minimum.at(star_after, star, min_dihedrals(points, star)[:, None])
     poorer = patch_node[star_after[patch_node] < star_before[patch_node]]
-    back = np.union1d(astray, poorer)
+    faces = boundary[np.isin(boundary, patch_node).any(axis=1)]
+    off_before = geometry.closest_point(before[faces].mean(axis=1))[1]
+    off_after = geometry.closest_point(points[faces].mean(axis=1))[1]
+    strays = (off_after > off_before) & (off_after > DEVIATION * h[faces].min(axis=1))
+    off_surface = np.intersect1d(faces[strays], patch_node)
+    back = np.union1d(np.union1d(astray, poorer), off_surface)
     points[back] = before[back]
     return points
 
