@@ -122,6 +122,7 @@ def test_every_job_gets_the_always_placed_patterns_unless_it_places_them_itself(
     assert [p.pattern for p in job_placements(job_from_dict({**plate, "recipe": "static-stress"}), KB)] == [
         "uniform-domain",
         "hole",
+        "fillet",
         "re-entrant-edge",
         "thin-wall",
         "narrow-gap",
