@@ -384,6 +384,7 @@ def test_two_curves_between_the_same_corners_a_hair_apart_are_one_chain():
     direction, so the patches outside meet on one chain. Curves 0.3 mm apart (wider than 0.1 h) keep their own."""
     from types import SimpleNamespace
 
+    from engine.features import Curve
     from engine.meshing.surface import _coincident
 
     line = np.array([[0.0, 0.0, 0.0], [0.7, 0.0, 0.0], [1.4, 0.0, 0.0]])
@@ -391,7 +392,10 @@ def test_two_curves_between_the_same_corners_a_hair_apart_are_one_chain():
     wide = line + [[0, 0, 0], [0, 0.3, 0], [0, 0, 0]]
     packing = SimpleNamespace(radius=np.full(6, 0.4))  # h 0.8
     for second, merged in ((bent, True), (wide, False)):
-        features = SimpleNamespace(curves=[SimpleNamespace(closed=False, polyline=p) for p in (line, second[::-1])])
+        curves = [
+            Curve(id=f"curve-{k}", points=p, closed=False, vertices=None) for k, p in enumerate((line, second[::-1]))
+        ]
+        features = SimpleNamespace(curves=curves)
         chains = _coincident(packing, features, {0: np.array([0, 2, 1]), 1: np.array([1, 3, 0])})
         assert chains[0].tolist() == [0, 2, 1]
         assert chains[1].tolist() == ([1, 2, 0] if merged else [1, 3, 0])

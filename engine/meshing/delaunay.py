@@ -103,7 +103,6 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
     held = np.concatenate([held[nodes], np.zeros(len(steiner), bool)])
     slide[0][held] = slide[1][held] = np.nan
     surface_node = np.nan_to_num(slide[1]).any(axis=1)  # patch and smooth-cut nodes: they slide on the surface
-    node_h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])
     points, moves = relocate(points, tets, slide[0], seed)
     if (quality_below(points, tets, TARGET)).any():  # last pass: curved-patch nodes slide too
         unslid = points
@@ -112,6 +111,7 @@ def mesh_delaunay(packing, geometry, features, *, seed: int = 0, prescribed=None
         moved = np.any(points != unslid, axis=1)
         slid = np.flatnonzero(moved & surface_node)
         points[slid], _, face = geometry.closest_point(points[slid])  # back onto the surface
+        node_h = 2 * np.concatenate([packing.radius[nodes], np.zeros(len(steiner))])
         points = _on_own_patches(
             points, unslid, slid, features.face_patch[face], level, entity, tets, boundary, geometry, node_h
         )

@@ -99,25 +99,21 @@ def _coincident(packing, features, chains: dict) -> dict:
             for earlier in group[:k]:
                 chain, other = chains[index], chains[earlier]
                 h = 2 * packing.radius[np.concatenate([chain, other])].min()
-                if (
-                    _polyline_distance(features.curves[index].polyline, features.curves[earlier].polyline)
-                    < COINCIDENT * h
-                ):
+                if _curve_distance(features.curves[index], features.curves[earlier]) < COINCIDENT * h:
                     chains[index] = other if other[0] == chain[0] else other[::-1]
                     break
     return chains
 
 
-def _polyline_distance(a: np.ndarray, b: np.ndarray, samples: int = 64) -> float:
-    """Two-sided Hausdorff distance between polylines (k, 3) and (l, 3), from ``samples`` points along each."""
+def _curve_distance(a, b, samples: int = 64) -> float:
+    """Two-sided Hausdorff distance between curves ``a`` and ``b`` (features.Curve), from ``samples`` points at
+    equal arc lengths along each to the other (its exact closest points)."""
 
-    def along(line):
-        length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
-        at = np.linspace(0.0, length[-1], samples)
-        return np.column_stack([np.interp(at, length, line[:, k]) for k in range(3)])
+    def one_way(start, to):
+        points = start.point_at(np.linspace(0.0, start.length, samples))
+        return np.linalg.norm(points - to.point_at(to.parameter(points)), axis=1).max()
 
-    a, b = along(a), along(b)
-    return max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max())
+    return max(one_way(a, b), one_way(b, a))
 
 
 def _corner_nodes(packing, features) -> np.ndarray:
